@@ -1,0 +1,1 @@
+//! Point and affine Sampson distances with analytic gradients (DESIGN.md §3). In progress.

@@ -1,0 +1,1 @@
+//! Minimal and non-minimal solvers (DESIGN.md §4). In progress.

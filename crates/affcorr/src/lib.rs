@@ -1,0 +1,19 @@
+//! affcorr: affine correspondences for relative pose, homography and fundamental estimation.
+//!
+//! This facade re-exports the workspace crates; add only `affcorr` to your `Cargo.toml`.
+//! - [`geom`]: conventions, AC synthesis/decomposition, Sampson distances, epipolar utilities.
+//! - [`solvers`]: minimal and non-minimal solvers.
+//! - [`ransac`]: robust estimation (issue #4, not yet implemented).
+//! - [`runner`]: ONNX networks (issues #5, #6, not yet implemented).
+//!
+//! ```
+//! use affcorr::geom::{affine::{AffineShape, synthesize, decompose}};
+//! let a = synthesize(&AffineShape { orientation: 0.3, scale: 2.0, residual_shape: [0.1, 0.2, 0.0] }, 0).unwrap();
+//! let shape = decompose(&a, 0).unwrap();
+//! assert!((shape.orientation - 0.3).abs() < 1e-12 && (shape.scale - 2.0).abs() < 1e-12);
+//! ```
+
+pub use affcorr_geom as geom;
+pub use affcorr_ransac as ransac;
+pub use affcorr_runner as runner;
+pub use affcorr_solvers as solvers;

@@ -1,0 +1,27 @@
+//! The `affcorr._native` extension module: thin bindings over the facade crate.
+//!
+//! - [`arrays`]: numpy in/out, dtype and contiguity conversion, shape checks that name the
+//!   argument, and the mapping of Rust errors to Python exceptions.
+//! - [`geom`]: synthesis, decomposition, homography ACs, normalisation, LAFs, epipolar utilities.
+//! - [`sampson`]: Sampson distances and their gradients.
+//! - [`solvers`]: minimal and non-minimal solvers.
+//!
+//! Every function validates its inputs here or in Rust and raises `ValueError` naming the bad
+//! argument; no Rust panic can cross this boundary because the core crates return `Result`s.
+//! Long batched calls release the GIL.
+
+use pyo3::prelude::*;
+
+mod arrays;
+mod geom;
+mod sampson;
+mod solvers;
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    geom::register(m)?;
+    sampson::register(m)?;
+    solvers::register(m)?;
+    Ok(())
+}
