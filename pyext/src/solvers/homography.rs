@@ -1,4 +1,4 @@
-//! Bindings of the solvers functions. In progress.
+//! Bindings of the homography solvers. In progress (issue #3).
 
 use pyo3::prelude::*;
 

@@ -1,0 +1,277 @@
+//! Real roots of univariate polynomials of degree ≤ [`MAX_DEGREE`], without allocation.
+//!
+//! Degrees 1–2 are closed form (the quadratic in its cancellation-free form). Higher degrees use
+//! a Sturm sequence (Sturm's theorem: the number of distinct real roots in (a, b] is
+//! V(a) − V(b), V = sign changes of the sequence p, p′, −rem(p, p′), …) to isolate each root in
+//! an interval, then safeguarded Newton iterations (falling back to bisection) to refine it.
+//! Coefficients are in ascending order: `c[0] + c[1]·x + … + c[d]·x^d`.
+
+/// Largest supported degree (the 5-point essential solver needs 10).
+pub const MAX_DEGREE: usize = 10;
+const LEN: usize = MAX_DEGREE + 1;
+
+/// p(x) by Horner's rule.
+#[inline]
+pub fn eval(c: &[f64], x: f64) -> f64 {
+    c.iter().rev().fold(0.0, |acc, &v| acc * x + v)
+}
+
+/// p(x) and p′(x) together.
+#[inline]
+fn eval_with_derivative(c: &[f64], x: f64) -> (f64, f64) {
+    let (mut p, mut dp) = (0.0, 0.0);
+    for &v in c.iter().rev() {
+        dp = dp * x + p;
+        p = p * x + v;
+    }
+    (p, dp)
+}
+
+/// Writes the distinct real roots of the polynomial `c` (ascending coefficients, degree ≤
+/// [`MAX_DEGREE`]) in ascending order into `roots` and returns how many there are. Leading
+/// coefficients that vanish relative to the others are dropped; a zero polynomial has no roots.
+/// `roots` must hold at least the degree's count.
+pub fn real_roots(c: &[f64], roots: &mut [f64]) -> usize {
+    assert!(c.len() <= LEN, "degree above MAX_DEGREE");
+    let scale = c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    if !(scale > 0.0) || c.iter().any(|v| !v.is_finite()) {
+        return 0;
+    }
+    let mut d = c.len() - 1;
+    while d > 0 && c[d].abs() <= 1e-14 * scale {
+        d -= 1;
+    }
+    match d {
+        0 => 0,
+        1 => {
+            roots[0] = -c[0] / c[1];
+            1
+        }
+        2 => quadratic(c[2], c[1], c[0], roots),
+        _ => sturm_roots(&c[..=d], roots),
+    }
+}
+
+/// Roots of a x² + b x + c, a ≠ 0, ascending.
+fn quadratic(a: f64, b: f64, c: f64, roots: &mut [f64]) -> usize {
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return 0;
+    }
+    if disc == 0.0 {
+        roots[0] = -b / (2.0 * a);
+        return 1;
+    }
+    // q = −(b + sign(b)√disc)/2 avoids cancellation; the roots are q/a and c/q.
+    let q = -0.5 * (b + b.signum() * disc.sqrt());
+    let (r0, r1) = if q == 0.0 { (0.0, 0.0) } else { (q / a, c / q) };
+    roots[0] = r0.min(r1);
+    roots[1] = r0.max(r1);
+    2
+}
+
+/// The Sturm sequence of `p`; returns the number of polynomials and their degrees.
+struct Sturm {
+    seq: [[f64; LEN]; LEN],
+    deg: [usize; LEN],
+    len: usize,
+}
+
+impl Sturm {
+    fn new(p: &[f64]) -> Self {
+        let mut s = Sturm { seq: [[0.0; LEN]; LEN], deg: [0; LEN], len: 2 };
+        let d = p.len() - 1;
+        // Monic p keeps the remainders well scaled.
+        let lead = p[d];
+        for i in 0..=d {
+            s.seq[0][i] = p[i] / lead;
+        }
+        s.deg[0] = d;
+        for i in 1..=d {
+            s.seq[1][i - 1] = s.seq[0][i] * i as f64 / d as f64;
+        }
+        s.deg[1] = d - 1;
+        while s.deg[s.len - 1] > 0 {
+            let k = s.len;
+            let (prev2, prev1) = (s.seq[k - 2], s.seq[k - 1]);
+            let (d2, d1) = (s.deg[k - 2], s.deg[k - 1]);
+            // Remainder of prev2 / prev1 by long division.
+            let mut r = prev2;
+            for shift in (0..=d2 - d1).rev() {
+                let q = r[shift + d1] / prev1[d1];
+                for i in 0..=d1 {
+                    r[shift + i] -= q * prev1[i];
+                }
+                r[shift + d1] = 0.0;
+            }
+            let mut rd = d1 - 1;
+            let rscale = r[..d1].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let pscale = prev1[..=d1].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            if rscale <= 1e-13 * pscale {
+                // p has a repeated root: the sequence ends at gcd(p, p′).
+                break;
+            }
+            while rd > 0 && r[rd].abs() <= 1e-14 * rscale {
+                rd -= 1;
+            }
+            // Negated remainder, normalised so its leading coefficient has magnitude 1.
+            let norm = -1.0 / r[rd].abs();
+            for i in 0..=rd {
+                s.seq[k][i] = r[i] * norm;
+            }
+            s.deg[k] = rd;
+            s.len += 1;
+        }
+        s
+    }
+
+    /// Sign changes of the sequence at x.
+    fn sign_changes(&self, x: f64) -> u32 {
+        let mut changes = 0;
+        let mut last = 0.0f64;
+        for k in 0..self.len {
+            let v = eval(&self.seq[k][..=self.deg[k]], x);
+            if v != 0.0 {
+                if last != 0.0 && (v > 0.0) != (last > 0.0) {
+                    changes += 1;
+                }
+                last = v;
+            }
+        }
+        changes
+    }
+}
+
+fn sturm_roots(p: &[f64], roots: &mut [f64]) -> usize {
+    let d = p.len() - 1;
+    let sturm = Sturm::new(p);
+    let monic = &sturm.seq[0][..=d];
+    // Cauchy's bound: every root has |x| < 1 + max |c_i / c_d|.
+    let bound = 1.0 + monic[..d].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let (lo, hi) = (-bound, bound);
+    let mut stack = [(0.0, 0.0, 0u32, 0u32, 0u32); 4 * LEN];
+    stack[0] = (lo, hi, sturm.sign_changes(lo), sturm.sign_changes(hi), 0);
+    let mut top = 1;
+    let mut count = 0;
+    while top > 0 {
+        top -= 1;
+        let (a, b, va, vb, depth) = stack[top];
+        let n = va.saturating_sub(vb);
+        if n == 0 {
+            continue;
+        }
+        if n == 1 || depth > 60 {
+            roots[count] = refine(monic, a, b);
+            count += 1;
+            continue;
+        }
+        let m = 0.5 * (a + b);
+        let vm = sturm.sign_changes(m);
+        // Push the upper half first so roots come out ascending.
+        if top + 2 <= stack.len() {
+            stack[top] = (m, b, vm, vb, depth + 1);
+            stack[top + 1] = (a, m, va, vm, depth + 1);
+            top += 2;
+        }
+    }
+    count
+}
+
+/// The single root of p in (a, b]: Newton steps kept inside a shrinking bracket.
+fn refine(p: &[f64], mut a: f64, mut b: f64) -> f64 {
+    let fa = eval(p, a);
+    let mut x = 0.5 * (a + b);
+    for _ in 0..100 {
+        let (f, df) = eval_with_derivative(p, x);
+        if f == 0.0 {
+            return x;
+        }
+        // Keep the bracket: the root lies where the sign differs from p(a).
+        if (f > 0.0) == (fa > 0.0) {
+            a = x;
+        } else {
+            b = x;
+        }
+        let newton = x - f / df;
+        let next = if df != 0.0 && newton > a && newton < b { newton } else { 0.5 * (a + b) };
+        if (next - x).abs() <= 1e-15 * x.abs().max(1e-300) {
+            return next;
+        }
+        x = next;
+    }
+    x
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Ascending coefficients of Π (x − r_i).
+    fn from_roots(r: &[f64]) -> Vec<f64> {
+        let mut c = vec![1.0];
+        for &root in r {
+            let mut next = vec![0.0; c.len() + 1];
+            for (i, &v) in c.iter().enumerate() {
+                next[i + 1] += v;
+                next[i] -= root * v;
+            }
+            c = next;
+        }
+        c
+    }
+
+    #[test]
+    fn finds_all_real_roots_of_products_of_linear_factors() {
+        let cases: &[&[f64]] = &[
+            &[2.0],
+            &[-1.0, 3.0],
+            &[-3.0, 0.5, 2.0],
+            &[-2.0, -1.0, 0.25, 1.0, 4.0],
+            &[-5.0, -3.3, -1.0, -0.1, 0.2, 0.7, 1.5, 2.5, 3.0, 9.0],
+        ];
+        for &r in cases {
+            let c = from_roots(r);
+            let mut out = [0.0; MAX_DEGREE];
+            let n = real_roots(&c, &mut out);
+            assert_eq!(n, r.len(), "{r:?}");
+            let mut sorted = r.to_vec();
+            sorted.sort_by(f64::total_cmp);
+            for (got, want) in out[..n].iter().zip(&sorted) {
+                assert!((got - want).abs() < 1e-9 * want.abs().max(1.0), "{got} vs {want}");
+            }
+        }
+    }
+
+    #[test]
+    fn complex_pairs_are_skipped() {
+        // (x² + 1)(x − 2)(x² + 4x + 5)(x + 0.5)
+        let mut c = from_roots(&[2.0, -0.5]);
+        for quad in [[1.0, 0.0, 1.0], [5.0, 4.0, 1.0]] {
+            let mut next = vec![0.0; c.len() + 2];
+            for (i, &v) in c.iter().enumerate() {
+                for (j, &q) in quad.iter().enumerate() {
+                    next[i + j] += v * q;
+                }
+            }
+            c = next;
+        }
+        let mut out = [0.0; MAX_DEGREE];
+        let n = real_roots(&c, &mut out);
+        assert_eq!(n, 2);
+        assert!((out[0] + 0.5).abs() < 1e-12 && (out[1] - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn degenerate_inputs() {
+        let mut out = [0.0; MAX_DEGREE];
+        assert_eq!(real_roots(&[0.0, 0.0, 0.0], &mut out), 0);
+        assert_eq!(real_roots(&[f64::NAN, 1.0], &mut out), 0);
+        assert_eq!(real_roots(&[1.0, 0.0, 1.0], &mut out), 0);
+        // A vanishing leading coefficient lowers the degree.
+        assert_eq!(real_roots(&[-4.0, 2.0, 0.0, 0.0], &mut out), 1);
+        assert!((out[0] - 2.0).abs() < 1e-15);
+        // A double root is found once.
+        let n = real_roots(&from_roots(&[1.0, 1.0, 3.0]), &mut out);
+        assert!(n >= 1 && out[..n].iter().any(|r| (r - 1.0).abs() < 1e-6));
+    }
+}

@@ -1,0 +1,42 @@
+"""affcorr: affine correspondences for relative pose, homography and fundamental estimation.
+
+An affine correspondence (AC) is a point match ``x1 <-> x2`` that also carries the local affine
+map ``A = dx2/dx1`` between the two images. Conventions (see DESIGN.md §2):
+
+- arrays are float64 (any input dtype or memory order is converted);
+- ACs are ``(N, 8)`` rows ``[x1, y1, x2, y2, a11, a12, a21, a22]``; points alone are ``(N, 4)``;
+- ``p2^T F p1 = 0``; the camera motion is ``X2 = R X1 + t`` and ``E = [t]x R``;
+- angles are radians.
+
+Every function raises ``ValueError`` naming the bad argument.
+"""
+
+from ._native import (
+    __version__,
+    affine_from_homography,
+    affine_to_laf,
+    correspondences_from_homography,
+    decompose_affine,
+    decompose_essential,
+    essential_from_pose,
+    fundamental_from_essential,
+    laf_to_affine,
+    normalize_correspondences,
+    pose_from_essential,
+    synthesize_affine,
+)
+
+__all__ = [
+    "__version__",
+    "affine_from_homography",
+    "affine_to_laf",
+    "correspondences_from_homography",
+    "decompose_affine",
+    "decompose_essential",
+    "essential_from_pose",
+    "fundamental_from_essential",
+    "laf_to_affine",
+    "normalize_correspondences",
+    "pose_from_essential",
+    "synthesize_affine",
+]

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# One-time setup of a fresh Debian machine: builds affcorr into .venv.
+#
+# .venv is made from Debian's python3 with --system-site-packages, because the only CPU build of
+# torch that can be had offline is Debian's python3-torch (DESIGN.md §7); torch is needed for the
+# training extras and their tests only (AFFCORR_WITH_TORCH=1), never at run time.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+missing=()
+/usr/bin/python3 -c "import venv, ensurepip" 2>/dev/null || missing+=(python3-venv)
+if [ "${AFFCORR_WITH_TORCH:-0}" = 1 ]; then
+    /usr/bin/python3 -c "import torch" 2>/dev/null || missing+=(python3-torch)
+fi
+if [ ${#missing[@]} -gt 0 ]; then
+    echo "setup: installing Debian packages: ${missing[*]}"
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends "${missing[@]}" >/dev/null
+fi
+
+if [ ! -x .venv/bin/python ]; then
+    /usr/bin/python3 -m venv --system-site-packages .venv
+fi
+.venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip
+echo "setup: building and installing affcorr (release build, a few minutes the first time)"
+.venv/bin/python -m pip install -q --disable-pip-version-check ".[test,plot]"
