@@ -23,4 +23,9 @@ if [ ! -x .venv/bin/python ]; then
 fi
 .venv/bin/python -m pip install -q --disable-pip-version-check --upgrade pip
 echo "setup: building and installing affcorr (release build, a few minutes the first time)"
-.venv/bin/python -m pip install -q --disable-pip-version-check ".[test,plot]"
+pip_install() { .venv/bin/python -m pip install -q --disable-pip-version-check -c scripts/constraints.txt "$@"; }
+pip_install ".[test,plot]"
+if [ "${AFFCORR_WITH_TORCH:-0}" = 1 ]; then
+    # --no-deps: kornia's torch requirement is met by Debian's torch; pip must not fetch PyPI's.
+    pip_install --no-deps "kornia==0.7.4" "kornia-rs>=0.1,<0.2"
+fi

@@ -1,0 +1,46 @@
+"""Small real test data shipped in the repository (data/), and readers for it."""
+
+from __future__ import annotations
+
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+
+def data_dir() -> Path:
+    """The repository's data/ folder: $AFFCORR_DATA, else the first data/ found walking up
+    from the current directory or from this file."""
+    env = os.environ.get("AFFCORR_DATA")
+    if env:
+        return Path(env)
+    for start in (Path.cwd(), Path(__file__).resolve()):
+        for d in (start, *start.parents):
+            if (d / "data" / "graffiti" / "H1to3p.xml").is_file():
+                return d / "data"
+    raise FileNotFoundError(
+        "affcorr's data/ folder was not found: run from the repository or set AFFCORR_DATA"
+    )
+
+
+def read_opencv_matrix(path: Path) -> np.ndarray:
+    """Reads the first matrix of an OpenCV XML storage file (rows, cols, data)."""
+    text = Path(path).read_text()
+    rows = int(re.search(r"<rows>\s*(\d+)\s*</rows>", text).group(1))
+    cols = int(re.search(r"<cols>\s*(\d+)\s*</cols>", text).group(1))
+    data = re.search(r"<data>(.*?)</data>", text, re.S).group(1).split()
+    return np.array([float(v) for v in data]).reshape(rows, cols)
+
+
+def read_gray(path: Path) -> np.ndarray:
+    """An image as float64 grayscale in [0, 1], shape (H, W)."""
+    from PIL import Image
+
+    return np.asarray(Image.open(path).convert("L"), dtype=np.float64) / 255.0
+
+
+def graffiti() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(image 1, image 3, H 1→3) of the Oxford graffiti sequence."""
+    d = data_dir() / "graffiti"
+    return read_gray(d / "graf1.png"), read_gray(d / "graf3.png"), read_opencv_matrix(d / "H1to3p.xml")

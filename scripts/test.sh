@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# All the tests, from a fresh machine: setup (with the training extras' torch), Rust, Python.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+AFFCORR_WITH_TORCH=1 bash scripts/setup.sh
+echo "== cargo test"
+cargo test --workspace --locked
+echo "== pytest"
+.venv/bin/python -m pytest -q
