@@ -54,6 +54,14 @@ pub fn residual_shape_matrix(x: &[f64; 3]) -> Option<Mat2> {
 }
 
 /// A = s · R(θ) · A′(A″) for one map (paper eq. 7). `index` only labels errors.
+///
+/// ```
+/// use affcorr_geom::affine::{AffineShape, synthesize};
+/// let shape = AffineShape { orientation: std::f64::consts::FRAC_PI_2, scale: 2.0, residual_shape: [0.0; 3] };
+/// let a = synthesize(&shape, 0).unwrap();
+/// // A quarter turn scaled by 2: x → (−2y, 2x).
+/// assert!((a - nalgebra::Matrix2::new(0.0, -2.0, 2.0, 0.0)).norm() < 1e-15);
+/// ```
 #[inline]
 pub fn synthesize(shape: &AffineShape, index: usize) -> Result<Mat2> {
     if !shape.orientation.is_finite() {
@@ -84,6 +92,14 @@ pub fn synthesize(shape: &AffineShape, index: usize) -> Result<Mat2> {
 }
 
 /// The unique (θ, s, canonical A″) with A = s · R(θ) · A′(A″); errors when det A ≤ 0.
+///
+/// ```
+/// use affcorr_geom::affine::decompose;
+/// let a = nalgebra::Matrix2::new(2.0, 0.0, 1.0, 0.5); // lower triangular: θ = 0
+/// let shape = decompose(&a, 0).unwrap();
+/// assert!(shape.orientation.abs() < 1e-15 && (shape.scale - 1.0).abs() < 1e-15);
+/// assert!(decompose(&nalgebra::Matrix2::new(1.0, 0.0, 0.0, -1.0), 0).is_err()); // reflection
+/// ```
 #[inline]
 pub fn decompose(a: &Mat2, index: usize) -> Result<AffineShape> {
     if a.iter().any(|v| !v.is_finite()) {

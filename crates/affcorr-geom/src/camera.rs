@@ -105,6 +105,16 @@ impl Intrinsics {
 }
 
 /// The AC in normalised coordinates: x̂1 = K1⁻¹p1, x̂2 = K2⁻¹p2, Â = K2⁻¹[0:2,0:2]·A·K1[0:2,0:2].
+///
+/// ```
+/// use affcorr_geom::{AffineCorrespondence, camera::{Intrinsics, normalize_ac}};
+/// let k1 = Intrinsics::from_focal(800.0, 400.0, 320.0, 240.0).unwrap();
+/// let ac = AffineCorrespondence::from_row(&[320.0, 240.0, 320.0, 240.0, 1.0, 0.0, 0.0, 1.0]);
+/// let n = normalize_ac(&ac, &k1, &k1);
+/// assert_eq!(n.x1, nalgebra::Vector2::zeros());
+/// // Identity A stays identity with K1 = K2 whatever fx/fy.
+/// assert!((n.a - nalgebra::Matrix2::identity()).norm() < 1e-15);
+/// ```
 #[inline]
 pub fn normalize_ac(
     ac: &AffineCorrespondence,
@@ -217,6 +227,27 @@ mod tests {
         let k =
             Intrinsics::new(Mat3::new(2.0, 0.0, 2.0, 0.0, 2.0, 2.0, 0.0, 0.0, 2.0), "K").unwrap();
         assert_eq!(k.matrix()[(2, 2)], 1.0);
+    }
+
+    proptest::proptest! {
+        /// Normalising then denormalising is the identity for any valid K pair, and the
+        /// normalised A is the chain rule of the two coordinate changes.
+        #[test]
+        fn normalisation_is_a_change_of_coordinates(
+            fx in 100.0f64..2000.0, ratio in 0.5f64..2.0, skew in -5.0f64..5.0,
+            cx in 0.0f64..1000.0, cy in 0.0f64..1000.0,
+            row in proptest::array::uniform8(-500.0f64..500.0),
+        ) {
+            let k1 = Intrinsics::new(Mat3::new(fx, skew, cx, 0.0, fx * ratio, cy, 0.0, 0.0, 1.0), "K1").unwrap();
+            let k2 = Intrinsics::from_focal(fx * ratio, fx, cy, cx).unwrap();
+            let ac = AffineCorrespondence::from_row(&row);
+            let n = normalize_ac(&ac, &k1, &k2);
+            let back = denormalize_ac(&n, &k1, &k2);
+            proptest::prop_assert!((back.x1 - ac.x1).norm() < 1e-9 * (1.0 + ac.x1.norm()));
+            proptest::prop_assert!((back.a - ac.a).norm() < 1e-9 * (1.0 + ac.a.norm()));
+            let p = k1.matrix() * nalgebra::Vector3::new(n.x1.x, n.x1.y, 1.0);
+            proptest::prop_assert!((p.xy() - ac.x1).norm() < 1e-9 * (1.0 + ac.x1.norm()));
+        }
     }
 
     #[test]

@@ -122,6 +122,16 @@ pub fn count_in_front(pose: &Pose, x1: &[Vec2], x2: &[Vec2]) -> usize {
 }
 
 /// The factorisation of `e` that puts the most correspondences in front of both cameras.
+///
+/// ```
+/// use affcorr_geom::{Mat3, Vec2, Vec3, epipolar::{Pose, pose_from_essential}};
+/// let truth = Pose { r: Mat3::identity(), t: Vec3::new(1.0, 0.0, 0.0) };
+/// // A point at (0, 0, 4) in camera 1 is at (1, 0, 4) in camera 2.
+/// let (x1, x2) = (vec![Vec2::new(0.0, 0.0)], vec![Vec2::new(0.25, 0.0)]);
+/// let (pose, n) = pose_from_essential(&truth.essential(), &x1, &x2).unwrap();
+/// assert_eq!(n, 1);
+/// assert!((pose.r - truth.r).norm() < 1e-12 && (pose.t - truth.t).norm() < 1e-12);
+/// ```
 /// Returns the pose and that count. Ties go to the first candidate in
 /// [`decompose_essential`]'s order.
 pub fn pose_from_essential(e: &Mat3, x1: &[Vec2], x2: &[Vec2]) -> Result<(Pose, usize)> {

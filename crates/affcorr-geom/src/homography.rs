@@ -12,6 +12,15 @@ use crate::types::{AcRow, AffineCorrespondence, Mat2, Mat3, Vec2};
 const VANISHING_W: f64 = 1e-12;
 
 /// The AC induced by `h` at `x1`: `(x1, x2, A)`. `index` only labels the error.
+///
+/// ```
+/// use affcorr_geom::{Mat3, Vec2, homography::ac_from_homography};
+/// // A pure scaling by 2 about the origin: A = 2·I everywhere.
+/// let h = Mat3::new(2.0, 0.0, 0.0, 0.0, 2.0, 0.0, 0.0, 0.0, 1.0);
+/// let ac = ac_from_homography(&h, &Vec2::new(3.0, 4.0), 0).unwrap();
+/// assert_eq!(ac.x2, Vec2::new(6.0, 8.0));
+/// assert_eq!(ac.a, nalgebra::Matrix2::new(2.0, 0.0, 0.0, 2.0));
+/// ```
 #[inline]
 pub fn ac_from_homography(h: &Mat3, x1: &Vec2, index: usize) -> Result<AffineCorrespondence> {
     if !x1.x.is_finite() || !x1.y.is_finite() {
@@ -108,6 +117,29 @@ mod tests {
                 let col = (project(&h, &dp) - project(&h, &dm)) / (2.0 * eps);
                 assert!((col - ac.a.column(j)).norm() < 1e-8, "column {j}");
             }
+        }
+    }
+
+    proptest::proptest! {
+        /// The AC of a composition is the composition of the ACs (chain rule):
+        /// A_{G∘H}(x) = A_G(H(x)) · A_H(x).
+        #[test]
+        fn acs_compose_like_jacobians(
+            h in proptest::array::uniform9(-1.0f64..1.0), g in proptest::array::uniform9(-1.0f64..1.0),
+            x in -2.0f64..2.0, y in -2.0f64..2.0,
+        ) {
+            let h = Mat3::from_row_slice(&h) + Mat3::identity() * 2.0;
+            let g = Mat3::from_row_slice(&g) + Mat3::identity() * 2.0;
+            let x1 = Vec2::new(x, y);
+            let (Ok(first), Ok(comp)) = (ac_from_homography(&h, &x1, 0), ac_from_homography(&(g * h), &x1, 0)) else {
+                return Ok(());
+            };
+            let Ok(second) = ac_from_homography(&g, &first.x2, 0) else { return Ok(()) };
+            let w = (g * h * nalgebra::Vector3::new(x, y, 1.0)).z.abs().min((h * nalgebra::Vector3::new(x, y, 1.0)).z.abs());
+            proptest::prop_assume!(w > 1e-3);
+            let scale = comp.a.norm().max(1.0);
+            proptest::prop_assert!((second.x2 - comp.x2).norm() < 1e-8 * comp.x2.norm().max(1.0));
+            proptest::prop_assert!((second.a * first.a - comp.a).norm() < 1e-8 * scale);
         }
     }
 
