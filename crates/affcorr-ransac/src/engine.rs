@@ -1,0 +1,483 @@
+//! The hypothesise-and-verify loop, generic over [`Problem`], [`Sampler`] and [`Scoring`].
+//!
+//! Per iteration: draw a minimal sample, fit its models, score each against all data (in blocks,
+//! with an exact bail-out), and on a new best model run local optimisation and tighten the
+//! adaptive iteration bound k = log(1 − confidence) / log(1 − wᵐ) (w: inlier ratio, m: sample
+//! size). Finally the best model is refined on its inliers. Buffers are allocated once, before
+//! the loop; the same seed and data always give the same result.
+
+use crate::error::{RansacError, Result};
+use crate::options::RansacOptions;
+use crate::problem::Problem;
+use crate::sampler::Sampler;
+use crate::score::Scoring;
+use rand::SeedableRng;
+use rand_pcg::Pcg64;
+
+/// Residuals are scored in blocks of this many data, checking the bail-out between blocks.
+const BLOCK: usize = 256;
+
+/// The result of a robust estimation.
+#[derive(Debug, Clone)]
+pub struct Estimate<M> {
+    /// The best model.
+    pub model: M,
+    /// Per-datum inlier flags under the final model.
+    pub inliers: Vec<bool>,
+    /// Number of inliers.
+    pub num_inliers: usize,
+    /// Score of the final model (sum of qualities, higher is better).
+    pub score: f64,
+    /// Iterations run (minimal samples drawn).
+    pub iterations: usize,
+    /// Local optimisations run.
+    pub lo_runs: usize,
+    /// Times the final refinement improved the model (0 or 1).
+    pub refinements: usize,
+}
+
+/// A model with its score and inlier count.
+#[derive(Clone)]
+struct Scored<M> {
+    model: M,
+    score: f64,
+    inliers: usize,
+}
+
+/// Scores `model` on all data; `None` as soon as it cannot beat `to_beat`.
+fn score_model<P: Problem, S: Scoring>(
+    problem: &P,
+    scoring: &S,
+    model: &P::Model,
+    to_beat: f64,
+    buf: &mut [f64],
+) -> Option<(f64, usize)> {
+    let n = problem.len();
+    let thr = scoring.inlier_threshold_sq();
+    let (mut score, mut inliers) = (0.0, 0usize);
+    let mut start = 0;
+    while start < n {
+        let len = BLOCK.min(n - start);
+        let block = &mut buf[..len];
+        problem.residuals(model, start, block);
+        for &r2 in block.iter() {
+            score += scoring.quality(r2);
+            inliers += usize::from(r2 < thr);
+        }
+        start += len;
+        // Even if every remaining datum were perfect (quality 1), could it still win?
+        if score + (n - start) as f64 <= to_beat {
+            return None;
+        }
+    }
+    Some((score, inliers))
+}
+
+/// Indices of the data with squared residual below the inlier threshold, and their weights.
+fn collect_inliers<P: Problem, S: Scoring>(
+    problem: &P,
+    scoring: &S,
+    model: &P::Model,
+    buf: &mut [f64],
+    indices: &mut Vec<usize>,
+    weights: &mut Vec<f64>,
+) {
+    indices.clear();
+    weights.clear();
+    let thr = scoring.inlier_threshold_sq();
+    let n = problem.len();
+    let mut start = 0;
+    while start < n {
+        let len = BLOCK.min(n - start);
+        problem.residuals(model, start, &mut buf[..len]);
+        for (k, &r2) in buf[..len].iter().enumerate() {
+            if r2 < thr {
+                indices.push(start + k);
+                weights.push(scoring.weight(r2));
+            }
+        }
+        start += len;
+    }
+}
+
+/// Adaptive bound on the number of iterations for `inliers` of `n` at `confidence`.
+fn iterations_needed(inliers: usize, n: usize, m: usize, confidence: f64) -> usize {
+    let w = inliers as f64 / n as f64;
+    let p_good = w.powi(m as i32);
+    if p_good >= 1.0 {
+        return 1;
+    }
+    if p_good <= f64::MIN_POSITIVE {
+        return usize::MAX;
+    }
+    let k = (1.0 - confidence).ln() / (1.0 - p_good).ln();
+    if k.is_finite() {
+        k.ceil().max(1.0) as usize
+    } else {
+        usize::MAX
+    }
+}
+
+/// Validates the options shared by every problem.
+pub fn check_options(o: &RansacOptions) -> Result<()> {
+    let bad = |name, value: f64, reason| {
+        Err(RansacError::InvalidOption {
+            name,
+            value: value.to_string(),
+            reason,
+        })
+    };
+    if !(o.threshold > 0.0 && o.threshold.is_finite()) {
+        return bad("threshold", o.threshold, "must be positive and finite");
+    }
+    if !(o.confidence > 0.0 && o.confidence < 1.0) {
+        return bad("confidence", o.confidence, "must be in (0, 1)");
+    }
+    if o.max_iterations == 0 {
+        return bad("max_iterations", 0.0, "must be at least 1");
+    }
+    if o.min_iterations > o.max_iterations {
+        return bad(
+            "min_iterations",
+            o.min_iterations as f64,
+            "must not exceed max_iterations",
+        );
+    }
+    Ok(())
+}
+
+/// Robustly fits `problem`'s model with `sampler` and `scoring`.
+pub fn estimate<P, Sa, Sc>(
+    problem: &P,
+    sampler: &mut Sa,
+    scoring: &Sc,
+    options: &RansacOptions,
+) -> Result<Estimate<P::Model>>
+where
+    P: Problem,
+    Sa: Sampler,
+    Sc: Scoring,
+{
+    check_options(options)?;
+    let n = problem.len();
+    let m = problem.sample_size();
+    if n < m {
+        return Err(RansacError::NotEnoughData {
+            what: "corrs",
+            needed: m,
+            got: n,
+        });
+    }
+    let mut rng = Pcg64::seed_from_u64(options.seed);
+    let mut sample = vec![0usize; m];
+    let mut models: Vec<P::Model> = Vec::with_capacity(16);
+    let mut buf = vec![0.0; BLOCK.min(n)];
+    let (mut lo_indices, mut lo_weights) = (Vec::with_capacity(n), Vec::with_capacity(n));
+
+    let mut best: Option<Scored<P::Model>> = None;
+    let mut bound = options.max_iterations;
+    let (mut iterations, mut lo_runs) = (0, 0);
+    while iterations
+        < bound
+            .max(options.min_iterations)
+            .min(options.max_iterations)
+    {
+        iterations += 1;
+        sampler.sample(&mut rng, n, &mut sample);
+        models.clear();
+        problem.fit_minimal(&sample, &mut models);
+        for model in models.drain(..) {
+            let to_beat = best.as_ref().map_or(0.0, |b| b.score);
+            let Some((score, inliers)) = score_model(problem, scoring, &model, to_beat, &mut buf)
+            else {
+                continue;
+            };
+            if score <= to_beat {
+                continue;
+            }
+            let mut candidate = Scored {
+                model,
+                score,
+                inliers,
+            };
+            if options.local_optimization && inliers > m {
+                lo_runs += 1;
+                candidate = local_optimization(
+                    problem,
+                    scoring,
+                    candidate,
+                    options,
+                    &mut buf,
+                    &mut lo_indices,
+                    &mut lo_weights,
+                );
+            }
+            bound = iterations_needed(candidate.inliers, n, m, options.confidence);
+            best = Some(candidate);
+        }
+    }
+
+    let mut best = best.ok_or(RansacError::NoModel)?;
+    let mut refinements = 0;
+    if options.final_refinement {
+        collect_inliers(
+            problem,
+            scoring,
+            &best.model,
+            &mut buf,
+            &mut lo_indices,
+            &mut lo_weights,
+        );
+        if lo_indices.len() >= m
+            && let Some(refined) =
+                problem.refine(&best.model, &lo_indices, scoring.inlier_threshold_sq())
+            && let Some((score, inliers)) =
+                score_model(problem, scoring, &refined, best.score, &mut buf)
+            && score > best.score
+        {
+            best = Scored {
+                model: refined,
+                score,
+                inliers,
+            };
+            refinements = 1;
+        }
+    }
+    let inliers = inlier_mask(problem, scoring, &best.model, &mut buf);
+    Ok(Estimate {
+        num_inliers: inliers.iter().filter(|&&b| b).count(),
+        model: best.model,
+        inliers,
+        score: best.score,
+        iterations,
+        lo_runs,
+        refinements,
+    })
+}
+
+/// Iterated (re-weighted) least squares on the inliers, kept while the score improves.
+fn local_optimization<P: Problem, S: Scoring>(
+    problem: &P,
+    scoring: &S,
+    mut best: Scored<P::Model>,
+    options: &RansacOptions,
+    buf: &mut [f64],
+    indices: &mut Vec<usize>,
+    weights: &mut Vec<f64>,
+) -> Scored<P::Model> {
+    for _ in 0..options.lo_iterations {
+        collect_inliers(problem, scoring, &best.model, buf, indices, weights);
+        if indices.len() <= problem.sample_size() {
+            break;
+        }
+        let Some(model) = problem.fit_nonminimal(indices, Some(weights)) else {
+            break;
+        };
+        match score_model(problem, scoring, &model, best.score, buf) {
+            Some((score, inliers)) if score > best.score => {
+                best = Scored {
+                    model,
+                    score,
+                    inliers,
+                }
+            }
+            _ => break,
+        }
+    }
+    best
+}
+
+fn inlier_mask<P: Problem, S: Scoring>(
+    problem: &P,
+    scoring: &S,
+    model: &P::Model,
+    buf: &mut [f64],
+) -> Vec<bool> {
+    let n = problem.len();
+    let thr = scoring.inlier_threshold_sq();
+    let mut mask = Vec::with_capacity(n);
+    let mut start = 0;
+    while start < n {
+        let len = BLOCK.min(n - start);
+        problem.residuals(model, start, &mut buf[..len]);
+        mask.extend(buf[..len].iter().map(|&r2| r2 < thr));
+        start += len;
+    }
+    mask
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sampler::UniformSampler;
+    use crate::score::Msac;
+    use rand::Rng;
+
+    /// 2-D line fitting y = a x + b: the smallest problem that exercises every path.
+    struct Line {
+        x: Vec<f64>,
+        y: Vec<f64>,
+    }
+
+    impl Problem for Line {
+        type Model = (f64, f64);
+        fn len(&self) -> usize {
+            self.x.len()
+        }
+        fn sample_size(&self) -> usize {
+            2
+        }
+        fn fit_minimal(&self, s: &[usize], out: &mut Vec<(f64, f64)>) {
+            let dx = self.x[s[1]] - self.x[s[0]];
+            if dx.abs() > 1e-12 {
+                let a = (self.y[s[1]] - self.y[s[0]]) / dx;
+                out.push((a, self.y[s[0]] - a * self.x[s[0]]));
+            }
+        }
+        fn fit_nonminimal(&self, idx: &[usize], w: Option<&[f64]>) -> Option<(f64, f64)> {
+            let (mut sw, mut sx, mut sy, mut sxx, mut sxy) = (0.0, 0.0, 0.0, 0.0, 0.0);
+            for (k, &i) in idx.iter().enumerate() {
+                let wi = w.map_or(1.0, |w| w[k]);
+                let (x, y) = (self.x[i], self.y[i]);
+                sw += wi;
+                sx += wi * x;
+                sy += wi * y;
+                sxx += wi * x * x;
+                sxy += wi * x * y;
+            }
+            let det = sw * sxx - sx * sx;
+            (det.abs() > 1e-12).then(|| ((sw * sxy - sx * sy) / det, (sxx * sy - sx * sxy) / det))
+        }
+        fn residuals(&self, m: &(f64, f64), start: usize, out: &mut [f64]) {
+            for (k, o) in out.iter_mut().enumerate() {
+                let r = self.y[start + k] - (m.0 * self.x[start + k] + m.1);
+                *o = r * r;
+            }
+        }
+    }
+
+    fn noisy_line(n: usize, outlier_ratio: f64, seed: u64) -> (Line, Vec<bool>) {
+        let mut rng = Pcg64::seed_from_u64(seed);
+        let (mut x, mut y, mut truth) = (vec![], vec![], vec![]);
+        for _ in 0..n {
+            let xi = rng.random_range(-10.0..10.0);
+            let outlier = rng.random::<f64>() < outlier_ratio;
+            let yi = if outlier {
+                rng.random_range(-50.0..50.0)
+            } else {
+                2.0 * xi - 1.0 + rng.random_range(-0.1..0.1)
+            };
+            x.push(xi);
+            y.push(yi);
+            truth.push(!outlier);
+        }
+        (Line { x, y }, truth)
+    }
+
+    #[test]
+    fn recovers_the_line_and_its_inliers_at_70_percent_outliers() {
+        let (line, truth) = noisy_line(2000, 0.7, 3);
+        let opts = RansacOptions {
+            threshold: 0.3,
+            ..Default::default()
+        };
+        let est = estimate(&line, &mut UniformSampler, &Msac::new(0.3), &opts).unwrap();
+        assert!(
+            (est.model.0 - 2.0).abs() < 0.01 && (est.model.1 + 1.0).abs() < 0.02,
+            "{:?}",
+            est.model
+        );
+        let recall = truth
+            .iter()
+            .zip(&est.inliers)
+            .filter(|(t, e)| **t && **e)
+            .count() as f64
+            / truth.iter().filter(|t| **t).count() as f64;
+        assert!(recall > 0.99, "{recall}");
+        assert!(est.lo_runs >= 1);
+        // The adaptive bound stopped the loop long before max_iterations.
+        assert!(est.iterations < 500, "{}", est.iterations);
+    }
+
+    #[test]
+    fn same_seed_same_result_other_seed_may_differ() {
+        let (line, _) = noisy_line(500, 0.5, 4);
+        let opts = RansacOptions {
+            threshold: 0.3,
+            seed: 9,
+            ..Default::default()
+        };
+        let a = estimate(&line, &mut UniformSampler, &Msac::new(0.3), &opts).unwrap();
+        let b = estimate(&line, &mut UniformSampler, &Msac::new(0.3), &opts).unwrap();
+        assert_eq!(a.model, b.model);
+        assert_eq!(a.inliers, b.inliers);
+        assert_eq!(a.iterations, b.iterations);
+    }
+
+    #[test]
+    fn errors_are_typed() {
+        let (line, _) = noisy_line(1, 0.0, 5);
+        let e = estimate(
+            &line,
+            &mut UniformSampler,
+            &Msac::new(1.0),
+            &RansacOptions::default(),
+        )
+        .unwrap_err();
+        assert_eq!(
+            e,
+            RansacError::NotEnoughData {
+                what: "corrs",
+                needed: 2,
+                got: 1
+            }
+        );
+        let (line, _) = noisy_line(10, 0.0, 5);
+        for o in [
+            RansacOptions {
+                threshold: 0.0,
+                ..Default::default()
+            },
+            RansacOptions {
+                threshold: f64::NAN,
+                ..Default::default()
+            },
+            RansacOptions {
+                confidence: 1.0,
+                ..Default::default()
+            },
+            RansacOptions {
+                max_iterations: 0,
+                ..Default::default()
+            },
+        ] {
+            assert!(matches!(
+                estimate(&line, &mut UniformSampler, &Msac::new(1.0), &o),
+                Err(RansacError::InvalidOption { .. })
+            ));
+        }
+        // All x equal: every sample is degenerate.
+        let flat = Line {
+            x: vec![1.0; 10],
+            y: (0..10).map(f64::from).collect(),
+        };
+        let e = estimate(
+            &flat,
+            &mut UniformSampler,
+            &Msac::new(1.0),
+            &RansacOptions {
+                max_iterations: 50,
+                ..Default::default()
+            },
+        );
+        assert_eq!(e.unwrap_err(), RansacError::NoModel);
+    }
+
+    #[test]
+    fn iteration_bound_follows_the_formula() {
+        // w = 0.5, m = 2, confidence 0.99: log(0.01)/log(0.75) = 16.0
+        assert_eq!(iterations_needed(50, 100, 2, 0.99), 17);
+        assert_eq!(iterations_needed(100, 100, 5, 0.99), 1);
+        assert_eq!(iterations_needed(0, 100, 5, 0.99), usize::MAX);
+    }
+}

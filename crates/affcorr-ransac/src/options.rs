@@ -1,0 +1,38 @@
+//! Options of the robust estimator, with their defaults.
+
+/// Options of [`crate::engine::estimate`]. Defaults are documented at each field.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RansacOptions {
+    /// Inlier threshold in residual units (pixels for every problem here). Default 1.0.
+    pub threshold: f64,
+    /// Confidence of the adaptive stopping rule. Default 0.9999.
+    pub confidence: f64,
+    /// Never fewer iterations than this. Default 0.
+    pub min_iterations: usize,
+    /// Never more iterations than this. Default 10 000.
+    pub max_iterations: usize,
+    /// Seed of the random generator: the same seed and data give the same result. Default 0.
+    pub seed: u64,
+    /// Run local optimisation (iterated least squares on the inliers) on every new best model.
+    /// Default true.
+    pub local_optimization: bool,
+    /// Most least-squares refits in one local optimisation. Default 10.
+    pub lo_iterations: usize,
+    /// Polish the final model with the problem's refinement (Levenberg–Marquardt). Default true.
+    pub final_refinement: bool,
+}
+
+impl Default for RansacOptions {
+    fn default() -> Self {
+        Self {
+            threshold: 1.0,
+            confidence: 0.9999,
+            min_iterations: 0,
+            max_iterations: 10_000,
+            seed: 0,
+            local_optimization: true,
+            lo_iterations: 10,
+            final_refinement: true,
+        }
+    }
+}

@@ -1,0 +1,46 @@
+//! The [`Problem`] trait: what the engine needs to know about a model-fitting problem.
+//!
+//! A problem owns its data (structure of arrays, so residual loops vectorise) and knows its
+//! minimal and non-minimal solvers, its residual and its refinement. The engine never looks at
+//! the data itself: samplers, scoring and local optimisation vary independently of the problem.
+
+/// A hypothesise-and-verify problem.
+pub trait Problem: Sync {
+    /// The model type (e.g. a 3×3 matrix, a pose).
+    type Model: Clone + Send + Sync;
+
+    /// Number of data (correspondences).
+    fn len(&self) -> usize;
+
+    /// True when there are no data.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Size of a minimal sample.
+    fn sample_size(&self) -> usize;
+
+    /// Fits the models of a minimal sample (indices into the data) and appends them to `out`
+    /// (the engine clears it). A degenerate sample appends nothing.
+    fn fit_minimal(&self, sample: &[usize], out: &mut Vec<Self::Model>);
+
+    /// Fits one model to a non-minimal set of data (`indices.len() ≥ sample_size()`), optionally
+    /// weighted; `None` when the set is degenerate.
+    fn fit_nonminimal(&self, indices: &[usize], weights: Option<&[f64]>) -> Option<Self::Model>;
+
+    /// Squared residuals, in the units of the squared threshold, of the data `start..start +
+    /// out.len()` under `model`.
+    fn residuals(&self, model: &Self::Model, start: usize, out: &mut [f64]);
+
+    /// Polishes `model` on its inliers by minimising a (robust) geometric error; `None` to keep
+    /// the model as it is. The default does nothing.
+    fn refine(
+        &self,
+        model: &Self::Model,
+        inliers: &[usize],
+        threshold_sq: f64,
+    ) -> Option<Self::Model> {
+        let _ = (model, inliers, threshold_sq);
+        None
+    }
+}
