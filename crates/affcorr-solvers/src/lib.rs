@@ -2,7 +2,14 @@
 //!
 //! Module map:
 //! - [`poly`]: real roots of univariate polynomials (Sturm sequences), shared by the solvers.
+//! - [`homography`]: H from 4 points, 2 ACs, 1 AC + F, and non-minimal least squares.
+//! - [`fundamental`]: F from 7 points, N ≥ 8 points, 3 ACs, and non-minimal AC least squares.
+//! - `normalization` (private): Hartley normalisation and the allocation-free linear algebra
+//!   (complete-pivoting Gauss–Jordan, streaming Givens QR) shared by the H and F solvers.
 //!
 //! Solvers are being added (issue #3).
 
+pub mod fundamental;
+pub mod homography;
+mod normalization;
 pub mod poly;

@@ -1,0 +1,366 @@
+//! Homography solvers, p2 ~ H p1 in pixels (DESIGN.md §2, §4).
+//!
+//! | solver | sample | models | method |
+//! |---|---|---|---|
+//! | [`homography_4pt`] | 4 points | ≤ 1 | normalised DLT, null space in closed form |
+//! | [`homography_2ac`] | 2 ACs | ≤ 1 | 12 linear equations (2 point + 4 affine per AC), least squares |
+//! | [`homography_1ac_given_f`] | 1 AC + F | ≤ 1 | H = −[e₂]×F + e₂vᵀ, 6 linear equations in v |
+//! | [`homography_lsq`] | N ≥ 4 points | ≤ 1 | normalised DLT, least squares |
+//! | [`homography_ac_lsq`] | N ≥ 2 ACs | ≤ 1 | the 2AC system over N ACs, least squares |
+//!
+//! All solvers take pixels, apply Hartley's isotropic normalisation internally
+//! ([`crate::normalization`]), and write H with ‖H‖_F = 1 (its sign is arbitrary) into the
+//! caller's buffer, returning the number of models. A sample of the wrong length, with a
+//! non-finite value, collinear or coincident points, an affine map with det A ≤ 0, or a
+//! rank-deficient linear system gives 0 models. `out` shorter than the solver's
+//! `*_MAX_SOLUTIONS` is a caller bug and panics.
+//!
+//! # Equations
+//! With p = (x, y, 1)ᵀ, hₖ the k-th row of H and w = h₃·p1:
+//! - point (DLT, Hartley & Zisserman, *Multiple View Geometry*, 2nd ed., eq. 4.3):
+//!   h₁·p1 − x2·(h₃·p1) = 0 and h₂·p1 − y2·(h₃·p1) = 0;
+//! - affine (from A = (H[0:2,0:2] − x2·H[2,0:2]) / w, DESIGN.md §2; Barath & Hajder, "A theory
+//!   of point-wise homography estimation", PRL 2017, eq. 9): for i, j ∈ {1, 2},
+//!   a_ij·(h₃·p1) − h_ij + x2_i·h_3j = 0.
+//!
+//! Both are linear and homogeneous in the 9 entries of H, and invariant in form under the
+//! normalising similarities (Â = (s₂/s₁)·A). In the over-determined AC systems the affine rows
+//! are scaled by ρ·s₁ with ρ = 8 px, which makes their residuals commensurate with the point
+//! rows' (an error ε in A moves points at distance ρ by ε·ρ); exact data is unaffected, noisy
+//! estimates improve about 3× against unweighted rows.
+
+use crate::normalization::{
+    AFFINE_ROW_RADIUS_PX, Lsq9, Similarity, mat3_from_vec9, unit_frobenius,
+};
+use affcorr_geom::{AffineCorrespondence, Mat3, Vec2, Vec3};
+use nalgebra::{SMatrix, SVector};
+
+/// Most models [`homography_4pt`] returns.
+pub const HOMOGRAPHY_4PT_MAX_SOLUTIONS: usize = 1;
+/// Most models [`homography_2ac`] returns.
+pub const HOMOGRAPHY_2AC_MAX_SOLUTIONS: usize = 1;
+/// Most models [`homography_1ac_given_f`] returns.
+pub const HOMOGRAPHY_1AC_GIVEN_F_MAX_SOLUTIONS: usize = 1;
+/// Most models [`homography_lsq`] returns.
+pub const HOMOGRAPHY_LSQ_MAX_SOLUTIONS: usize = 1;
+/// Most models [`homography_ac_lsq`] returns.
+pub const HOMOGRAPHY_AC_LSQ_MAX_SOLUTIONS: usize = 1;
+
+/// Twice the area of a triangle of normalised points (mean distance √2 from the centroid) below
+/// which the triangle counts as collinear.
+const COLLINEAR_TOL: f64 = 1e-8;
+/// A singular value of a normalised linear system below this × the largest counts as zero.
+const RANK_TOL: f64 = 1e-9;
+
+/// The homography of 4 point correspondences (exactly determined).
+///
+/// Normalised DLT (Hartley & Zisserman, Alg. 4.2) with the 8×9 null space solved in closed form
+/// instead of by an SVD. Stack the normalised points as the rows pᵢᵀ of the 4×3 matrix P and
+/// write H = [a b c]ᵀ. The DLT equations are P a = Dₓ P c and P b = D_y P c with
+/// Dₓ = diag(x2ᵢ), D_y = diag(y2ᵢ). The left null vector of P is n, nᵢ = (−1)ⁱ det P₋ᵢ (P₋ᵢ: P
+/// without row i; |nᵢ| is twice the area of the triangle of the other three points). Multiplying
+/// by nᵀ eliminates a and b: (Pᵀ Dₓ n)·c = 0 and (Pᵀ D_y n)·c = 0, so
+/// c = (Pᵀ Dₓ n) × (Pᵀ D_y n). Then a and b follow from the three points of the largest
+/// triangle: a = P₃⁻¹ (Dₓ P c)₃, b = P₃⁻¹ (D_y P c)₃.
+///
+/// Returns 0 when `x1`/`x2` do not hold 4 finite points each, or when 3 of the 4 points are
+/// collinear (or coincide) in either image.
+///
+/// ```
+/// use affcorr_geom::{Mat3, Vec2, Vec3};
+/// use affcorr_solvers::homography::{homography_4pt, HOMOGRAPHY_4PT_MAX_SOLUTIONS};
+/// let h = Mat3::new(1.1, 0.1, 5.0, -0.05, 0.9, 3.0, 1e-4, 2e-4, 1.0);
+/// let x1 = [Vec2::new(0.0, 0.0), Vec2::new(100.0, 0.0), Vec2::new(100.0, 80.0), Vec2::new(10.0, 90.0)];
+/// let x2 = x1.map(|p| (h * Vec3::new(p.x, p.y, 1.0)).xy() / (h * Vec3::new(p.x, p.y, 1.0)).z);
+/// let mut out = [Mat3::zeros(); HOMOGRAPHY_4PT_MAX_SOLUTIONS];
+/// assert_eq!(homography_4pt(&x1, &x2, &mut out), 1);
+/// let (e, g) = (out[0] / out[0][(2, 2)], h / h[(2, 2)]);
+/// assert!((e - g).norm() < 1e-10 * g.norm());
+/// ```
+pub fn homography_4pt(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
+    assert!(out.len() >= HOMOGRAPHY_4PT_MAX_SOLUTIONS, "out too short");
+    if x1.len() != 4 || x2.len() != 4 {
+        return 0;
+    }
+    let (Some(t1), Some(t2)) = (
+        Similarity::from_points(x1.iter().copied()),
+        Similarity::from_points(x2.iter().copied()),
+    ) else {
+        return 0;
+    };
+    let p: [Vec3; 4] = std::array::from_fn(|i| t1.apply(&x1[i]).push(1.0));
+    let q: [Vec2; 4] = std::array::from_fn(|i| t2.apply(&x2[i]));
+    // nᵢ = (−1)ⁱ det P₋ᵢ, and the same for image 2 (only to reject collinear triples there).
+    let tri = |a: Vec2, b: Vec2, c: Vec2| (b - a).perp(&(c - a));
+    let pxy = |i: usize| p[i].xy();
+    let n = [
+        -tri(pxy(1), pxy(2), pxy(3)),
+        tri(pxy(0), pxy(2), pxy(3)),
+        -tri(pxy(0), pxy(1), pxy(3)),
+        tri(pxy(0), pxy(1), pxy(2)),
+    ];
+    let m = [
+        tri(q[1], q[2], q[3]),
+        tri(q[0], q[2], q[3]),
+        tri(q[0], q[1], q[3]),
+        tri(q[0], q[1], q[2]),
+    ];
+    // `!(a > b)` also rejects NaN.
+    if n.iter().chain(&m).any(|v| !(v.abs() > COLLINEAR_TOL)) {
+        return 0;
+    }
+    let (mut u, mut w) = (Vec3::zeros(), Vec3::zeros());
+    for i in 0..4 {
+        u += p[i] * (n[i] * q[i].x);
+        w += p[i] * (n[i] * q[i].y);
+    }
+    let c = u.cross(&w);
+    // The three points of the largest triangle: all but row `skip`.
+    let skip = (0..4).fold(0, |b, i| if n[i].abs() > n[b].abs() { i } else { b });
+    let rows: [usize; 3] = match skip {
+        0 => [1, 2, 3],
+        1 => [0, 2, 3],
+        2 => [0, 1, 3],
+        _ => [0, 1, 2],
+    };
+    let p3 = Mat3::from_rows(&[
+        p[rows[0]].transpose(),
+        p[rows[1]].transpose(),
+        p[rows[2]].transpose(),
+    ]);
+    let Some(p3_inv) = p3.try_inverse() else {
+        return 0;
+    };
+    let wc = Vec3::from_fn(|k, _| c.dot(&p[rows[k]]));
+    let a = p3_inv * Vec3::from_fn(|k, _| q[rows[k]].x * wc[k]);
+    let b = p3_inv * Vec3::from_fn(|k, _| q[rows[k]].y * wc[k]);
+    let h_norm = Mat3::from_rows(&[a.transpose(), b.transpose(), c.transpose()]);
+    finish(&h_norm, &t1, &t2, out)
+}
+
+/// The homography of 2 ACs: 12 linear equations (per AC, 2 point DLT rows and the 4 affine rows
+/// of the module doc) in the 9 entries of H, solved in the least-squares sense in normalised
+/// coordinates (an over-determined system: 8 unknowns up to scale). Barath & Hajder, PRL 2017,
+/// §3 ("HA" method).
+///
+/// Returns 0 for a sample of the wrong length, non-finite values, det A ≤ 0, coincident points,
+/// or a system whose null space is not one-dimensional.
+pub fn homography_2ac(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize {
+    assert!(out.len() >= HOMOGRAPHY_2AC_MAX_SOLUTIONS, "out too short");
+    if acs.len() != 2 {
+        return 0;
+    }
+    ac_least_squares(acs, out)
+}
+
+/// The non-minimal homography of N ≥ 2 ACs: the system of [`homography_2ac`] over all ACs,
+/// least squares (algebraic error, normalised coordinates).
+pub fn homography_ac_lsq(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize {
+    assert!(
+        out.len() >= HOMOGRAPHY_AC_LSQ_MAX_SOLUTIONS,
+        "out too short"
+    );
+    if acs.len() < 2 {
+        return 0;
+    }
+    ac_least_squares(acs, out)
+}
+
+/// The non-minimal normalised DLT on N ≥ 4 point correspondences (Hartley & Zisserman,
+/// Alg. 4.2): the 2N×9 system folded into a 9×9 triangular factor by Givens rotations, then the
+/// right singular vector of its smallest singular value. Allocation-free.
+///
+/// Returns 0 when `x1.len() != x2.len()`, N < 4, a value is not finite, or the null space is not
+/// one-dimensional (e.g. all points collinear).
+pub fn homography_lsq(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
+    assert!(out.len() >= HOMOGRAPHY_LSQ_MAX_SOLUTIONS, "out too short");
+    if x1.len() != x2.len() || x1.len() < 4 {
+        return 0;
+    }
+    let (Some(t1), Some(t2)) = (
+        Similarity::from_points(x1.iter().copied()),
+        Similarity::from_points(x2.iter().copied()),
+    ) else {
+        return 0;
+    };
+    let mut lsq = Lsq9::new();
+    for (a, b) in x1.iter().zip(x2) {
+        let (p, q) = (t1.apply(a), t2.apply(b));
+        let [r1, r2] = point_rows(&p, &q);
+        lsq.add_row(r1);
+        lsq.add_row(r2);
+    }
+    solve_lsq(&lsq, &t1, &t2, out)
+}
+
+/// The homography of one AC given the fundamental matrix F (p2ᵀ F p1 = 0, pixels).
+///
+/// Every homography compatible with F is H = −[e₂]×F + e₂vᵀ up to scale, with e₂ the epipole in
+/// image 2 (Fᵀe₂ = 0, ‖e₂‖ = 1) and v ∈ ℝ³ (Hartley & Zisserman, Result 13.3, using
+/// −[e₂]×[e₂]×F = F for unit e₂). Substituting it into the 2 point and 4 affine equations of
+/// the module doc, each linear in H, gives 6 linear equations in v,
+/// Σₖ (Σᵢ rᵢₖ e₂ᵢ) vₖ = r · vec([e₂]×F) for each equation row r (r as a 3×3 matrix). With exact
+/// data their rank is 3 (one point and two affine equations are implied by the epipolar and
+/// affine epipolar constraints), so v is their least-squares solution. This is the HAF method of
+/// Barath & Hajder, "A theory of point-wise homography estimation", PRL 2017, §4; the whole
+/// computation runs in Hartley-normalised coordinates, F̂ = T₂⁻ᵀ F T₁⁻¹.
+///
+/// Returns 0 for `acs.len() != 1`, non-finite values, det A ≤ 0, F of rank below 2, or an
+/// ill-conditioned system (e.g. x2 at the epipole).
+pub fn homography_1ac_given_f(acs: &[AffineCorrespondence], f: &Mat3, out: &mut [Mat3]) -> usize {
+    assert!(
+        out.len() >= HOMOGRAPHY_1AC_GIVEN_F_MAX_SOLUTIONS,
+        "out too short"
+    );
+    let [ac] = acs else {
+        return 0;
+    };
+    if !valid_ac(ac) || f.iter().any(|v| !v.is_finite()) {
+        return 0;
+    }
+    // A single point has no spread: translate it to the origin and scale by 1/max(‖x‖, 1), the
+    // order of the image size for pixel coordinates.
+    let t1 = Similarity {
+        s: 1.0 / ac.x1.norm().max(1.0),
+        c: ac.x1,
+    };
+    let t2 = Similarity {
+        s: 1.0 / ac.x2.norm().max(1.0),
+        c: ac.x2,
+    };
+    let f_hat = t2.inverse_matrix().transpose() * f * t1.inverse_matrix();
+    let svd = f_hat.svd(true, false);
+    let Some(u) = svd.u else {
+        return 0;
+    };
+    let s = svd.singular_values;
+    let (mut lo, mut hi) = (0, 0);
+    for k in 1..3 {
+        if s[k] < s[lo] {
+            lo = k;
+        }
+        if s[k] > s[hi] {
+            hi = k;
+        }
+    }
+    let mid = 3 - lo - hi;
+    if lo == hi || !(s[mid] > RANK_TOL * s[hi]) {
+        return 0;
+    }
+    let e2: Vec3 = u.column(lo).into();
+    let base = -e2.cross_matrix() * f_hat;
+    let (p, q) = (t1.apply(&ac.x1), t2.apply(&ac.x2));
+    let a_hat = ac.a * (t2.s / t1.s);
+    let [r1, r2] = point_rows(&p, &q);
+    let [r3, r4, r5, r6] = affine_rows(&p, &q, &a_hat);
+    let mut m = SMatrix::<f64, 6, 3>::zeros();
+    let mut rhs = SVector::<f64, 6>::zeros();
+    for (i, r) in [r1, r2, r3, r4, r5, r6].iter().enumerate() {
+        for k in 0..3 {
+            m[(i, k)] = (0..3).map(|j| r[3 * j + k] * e2[j]).sum();
+        }
+        rhs[i] = -(0..9).map(|j| r[j] * base[(j / 3, j % 3)]).sum::<f64>();
+    }
+    let svd = m.svd(true, true);
+    let sv = svd.singular_values;
+    let (smin, smax) = (sv.min(), sv.max());
+    if !(smin > RANK_TOL * smax) {
+        return 0;
+    }
+    let Ok(v) = svd.solve(&rhs, 0.0) else {
+        return 0;
+    };
+    let h_norm = base + e2 * v.transpose();
+    finish(&h_norm, &t1, &t2, out)
+}
+
+/// det A > 0 and everything finite.
+#[inline]
+fn valid_ac(ac: &AffineCorrespondence) -> bool {
+    ac.x1.iter().chain(ac.x2.iter()).all(|v| v.is_finite())
+        && ac.a.iter().all(|v| v.is_finite())
+        && ac.a.determinant() > 0.0
+}
+
+/// The two DLT rows of a normalised point pair.
+#[inline]
+fn point_rows(p: &Vec2, q: &Vec2) -> [[f64; 9]; 2] {
+    let (x, y) = (p.x, p.y);
+    [
+        [x, y, 1.0, 0.0, 0.0, 0.0, -q.x * x, -q.x * y, -q.x],
+        [0.0, 0.0, 0.0, x, y, 1.0, -q.y * x, -q.y * y, -q.y],
+    ]
+}
+
+/// The four affine rows a_ij·(h₃·p) − h_ij + q_i·h_3j = 0 of a normalised AC.
+#[inline]
+fn affine_rows(p: &Vec2, q: &Vec2, a: &affcorr_geom::Mat2) -> [[f64; 9]; 4] {
+    let mut rows = [[0.0; 9]; 4];
+    for i in 0..2 {
+        for j in 0..2 {
+            let r = &mut rows[2 * i + j];
+            let aij = a[(i, j)];
+            r[6] = aij * p.x;
+            r[7] = aij * p.y;
+            r[8] = aij;
+            r[3 * i + j] = -1.0;
+            r[6 + j] += q[i];
+        }
+    }
+    rows
+}
+
+/// The shared AC least-squares path of [`homography_2ac`] and [`homography_ac_lsq`].
+fn ac_least_squares(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize {
+    if !acs.iter().all(valid_ac) {
+        return 0;
+    }
+    let (Some(t1), Some(t2)) = (
+        Similarity::from_points(acs.iter().map(|ac| ac.x1)),
+        Similarity::from_points(acs.iter().map(|ac| ac.x2)),
+    ) else {
+        return 0;
+    };
+    let scale = t2.s / t1.s;
+    let w = AFFINE_ROW_RADIUS_PX * t1.s;
+    let mut lsq = Lsq9::new();
+    for ac in acs {
+        let (p, q) = (t1.apply(&ac.x1), t2.apply(&ac.x2));
+        for r in point_rows(&p, &q) {
+            lsq.add_row(r);
+        }
+        for r in affine_rows(&p, &q, &(ac.a * scale)) {
+            lsq.add_row(r.map(|v| v * w));
+        }
+    }
+    solve_lsq(&lsq, &t1, &t2, out)
+}
+
+/// The least-squares null vector as H, if the null space is one-dimensional.
+fn solve_lsq(lsq: &Lsq9, t1: &Similarity, t2: &Similarity, out: &mut [Mat3]) -> usize {
+    let Some(ns) = lsq.solve() else {
+        return 0;
+    };
+    if ns.dimension(RANK_TOL) > 1 {
+        return 0;
+    }
+    finish(&mat3_from_vec9(ns.v[0].as_slice()), t1, t2, out)
+}
+
+/// Denormalises Ĥ (H = T₂⁻¹ Ĥ T₁), rejects singular or non-finite results, writes H/‖H‖_F.
+fn finish(h_norm: &Mat3, t1: &Similarity, t2: &Similarity, out: &mut [Mat3]) -> usize {
+    let Some(hn) = unit_frobenius(h_norm) else {
+        return 0;
+    };
+    // A homography between two views of a plane is invertible; ‖Ĥ‖ = 1 here.
+    if !(hn.determinant().abs() > 1e-12) {
+        return 0;
+    }
+    match unit_frobenius(&(t2.inverse_matrix() * hn * t1.matrix())) {
+        Some(h) => {
+            out[0] = h;
+            1
+        }
+        None => 0,
+    }
+}
