@@ -62,3 +62,45 @@ def pose_from_essential(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], int]:
     """The (R, t) of E that puts the most normalised correspondences x1, x2 (N, 2) in front of
     both cameras, and that count."""
+
+# --- homography / fundamental solvers (issue #3) -----------------------------------------------
+# Inputs are pixels (normalised internally). Each solver returns a list of candidate models, each
+# a (3, 3) array with unit Frobenius norm and arbitrary sign: p2 ~ H p1 for homographies,
+# p2^T F p1 = 0 for fundamental matrices. A degenerate sample (collinear or coincident points,
+# all correspondences on one plane for F, det A <= 0, a rank-deficient system) gives []. Bad
+# shapes and NaN/infinity raise ValueError naming the argument. ACs are (N, 8) rows
+# [x1, y1, x2, y2, a11, a12, a21, a22] with A = dx2/dx1.
+
+def homography_4pt(x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
+    """H from 4 point correspondences x1, x2 (4, 2): normalised DLT, closed-form null space.
+    [] if three of the points are collinear in either image."""
+
+def homography_2ac(corrs: ArrayLike) -> list[NDArray[np.float64]]:
+    """H from 2 ACs (2, 8): 2 point + 4 affine linear equations each, least squares (12 x 9)."""
+
+def homography_1ac_given_f(corrs: ArrayLike, F: ArrayLike) -> list[NDArray[np.float64]]:
+    """H from 1 AC (1, 8) and the fundamental matrix F (3, 3): H = -[e2]x F + e2 v^T with v from
+    6 linear equations (Barath & Hajder 2017). [] if F has rank < 2."""
+
+def homography_lsq(x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
+    """Non-minimal normalised DLT on N >= 4 point correspondences x1, x2 (N, 2) (least squares)."""
+
+def homography_ac_lsq(corrs: ArrayLike) -> list[NDArray[np.float64]]:
+    """Non-minimal H from N >= 2 ACs (N, 8): the homography_2ac system over all ACs, least
+    squares; affine rows weighted as an AC's points at 8 px from its centre."""
+
+def fundamental_7pt(x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
+    """F from 7 point correspondences x1, x2 (7, 2): 2-dim null space + cubic det constraint.
+    Up to 3 candidates, each of rank 2."""
+
+def fundamental_8pt(x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
+    """Normalised 8-point algorithm on N >= 8 point correspondences x1, x2 (N, 2); rank 2 enforced."""
+
+def fundamental_3ac(corrs: ArrayLike) -> list[NDArray[np.float64]]:
+    """F from 3 ACs (3, 8): 1 epipolar + 2 affine epipolar equations each (9 x 9, rank 8
+    generically), least-squares null vector, rank 2 enforced. One model generically (up to 3
+    from the cubic if the null space is 2-dim); [] if all 3 ACs come from one plane."""
+
+def fundamental_ac_lsq(corrs: ArrayLike) -> list[NDArray[np.float64]]:
+    """Non-minimal F from N >= 3 ACs (N, 8): the fundamental_3ac system over all ACs, least
+    squares, rank 2 enforced."""
