@@ -32,6 +32,10 @@ from ._native import (
     laf_to_affine,
     normalize_correspondences,
     pose_from_essential,
+    sampson_affine,
+    sampson_affine_grad,
+    sampson_point,
+    sampson_point_grad,
     synthesize_affine,
 )
 
@@ -56,5 +60,9 @@ __all__ = [
     "laf_to_affine",
     "normalize_correspondences",
     "pose_from_essential",
+    "sampson_affine",
+    "sampson_affine_grad",
+    "sampson_point",
+    "sampson_point_grad",
     "synthesize_affine",
 ]

@@ -63,6 +63,34 @@ def pose_from_essential(
     """The (R, t) of E that puts the most normalised correspondences x1, x2 (N, 2) in front of
     both cameras, and that count."""
 
+# --- Sampson distances (DESIGN.md §3) ---------------------------------------------------------
+# F is (3, 3), shared by every row, or (N, 3, 3), one per row. Distances are in squared units of
+# the coordinates (pixels^2 for a pixel F) and invariant to the scale of F. A zero denominator
+# (only for special F) gives 0 when the residual is 0 too, else +inf, with zero gradient.
+
+def sampson_point(F: ArrayLike, corrs: ArrayLike) -> NDArray[np.float64]:
+    """Point Sampson distance per row (N,) of corrs (N, 4) or (N, 8) (A columns ignored):
+    SD_P = (p2^T F p1)^2 / ((F p1)_1^2 + (F p1)_2^2 + (F^T p2)_1^2 + (F^T p2)_2^2), p = (x, y, 1)."""
+
+def sampson_affine(F: ArrayLike, corrs: ArrayLike) -> NDArray[np.float64]:
+    """Affine Sampson distances (N, 2) of ACs (N, 8), one per row k of the affine epipolar
+    constraint A^T (F p1)[:2] + (F^T p2)[:2] = 0 (A = dx2/dx1):
+    r_k = sum_i a_ik (F p1)_i + (F^T p2)_k, SD_A,k = r_k^2 / |dr_k/d(x1, y1, x2, y2, a1k, a2k)|^2.
+    SD_A is the sum of the two columns."""
+
+def sampson_point_grad(
+    F: ArrayLike, corrs: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """sampson_point and its analytic gradient per row: (dist (N,), d_corrs (N, 4) or (N, 8),
+    d_F (N, 3, 3)). d_corrs has the width of corrs (zero A columns for (N, 8)); d_F is per row
+    (sum it over rows for a shared F)."""
+
+def sampson_affine_grad(
+    F: ArrayLike, corrs: ArrayLike
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """sampson_affine and its analytic gradients per row and per constraint row k:
+    (dist (N, 2), d_corrs (N, 2, 8), d_F (N, 2, 3, 3)), d_corrs[n, k] = dSD_A,k/d corrs[n]."""
+
 # --- homography / fundamental solvers (issue #3) -----------------------------------------------
 # Inputs are pixels (normalised internally). Each solver returns a list of candidate models, each
 # a (3, 3) array with unit Frobenius norm and arbitrary sign: p2 ~ H p1 for homographies,
