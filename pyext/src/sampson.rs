@@ -6,7 +6,7 @@
 
 use crate::arrays::{Dim, F64Array, to_numpy, value_error};
 use affcorr::geom::Mat3;
-use affcorr::geom::sampson::{self, AffineSampsonGrad, Fundamentals, PointSampsonGrad};
+use affcorr::geom::sampson::{self, Fundamentals};
 use numpy::PyArrayDyn;
 use pyo3::prelude::*;
 
@@ -94,10 +94,11 @@ fn sampson_affine<'py>(
     let f = FArg::extract(F)?;
     let c = affine_corrs(corrs)?;
     let (f, rows) = (f.get(), c.rows::<8>());
-    let mut out = vec![[0.0; 2]; rows.len()];
-    py.detach(|| sampson::sampson_affine_batch(f, rows, &mut out))
+    let mut out = vec![0.0; 2 * rows.len()];
+    let out_rows = out.as_chunks_mut::<2>().0;
+    py.detach(|| sampson::sampson_affine_batch(f, rows, out_rows))
         .map_err(value_error)?;
-    to_numpy(py, &[out.len(), 2], out.into_iter().flatten().collect())
+    to_numpy(py, &[rows.len(), 2], out)
 }
 
 #[pyfunction]
@@ -112,24 +113,23 @@ fn sampson_point_grad<'py>(
     let c = point_corrs(corrs)?;
     let f = f.get();
     let (n, width) = (c.shape()[0], c.shape()[1]);
-    let mut out = vec![PointSampsonGrad::default(); n];
+    // Written in place into the final arrays (no intermediate rows: at these sizes fresh memory,
+    // not arithmetic, is the cost).
+    let (mut value, mut d_corrs, mut d_f) = (vec![0.0; n], vec![0.0; n * width], vec![0.0; n * 9]);
+    let d_f_rows = d_f.as_chunks_mut::<9>().0;
     let result = if width == 4 {
-        let rows = c.rows::<4>();
-        py.detach(|| sampson::sampson_point_grad_batch(f, rows, &mut out))
+        let (rows, d_rows) = (c.rows::<4>(), d_corrs.as_chunks_mut::<4>().0);
+        py.detach(|| sampson::sampson_point_grad_columns(f, rows, &mut value, d_rows, d_f_rows))
     } else {
-        let rows = c.rows::<8>();
-        py.detach(|| sampson::sampson_point_grad_batch(f, rows, &mut out))
+        // The A columns of the gradient stay zero: SD_P does not depend on them.
+        let (rows, d_rows) = (c.rows::<8>(), d_corrs.as_chunks_mut::<8>().0);
+        py.detach(|| sampson::sampson_point_grad_columns(f, rows, &mut value, d_rows, d_f_rows))
     };
     result.map_err(value_error)?;
-    let mut d_corrs = vec![0.0; n * width];
-    for (row, g) in d_corrs.chunks_exact_mut(width).zip(&out) {
-        // The A columns of an (N, 8) input stay zero: SD_P does not depend on them.
-        row[..4].copy_from_slice(&g.d_row());
-    }
     Ok((
-        to_numpy(py, &[n], out.iter().map(|g| g.value).collect())?,
+        to_numpy(py, &[n], value)?,
         to_numpy(py, &[n, width], d_corrs)?,
-        to_numpy(py, &[n, 3, 3], out.iter().flat_map(|g| g.d_f).collect())?,
+        to_numpy(py, &[n, 3, 3], d_f)?,
     ))
 }
 
@@ -145,13 +145,16 @@ fn sampson_affine_grad<'py>(
     let c = affine_corrs(corrs)?;
     let (f, rows) = (f.get(), c.rows::<8>());
     let n = rows.len();
-    let mut out = vec![[AffineSampsonGrad::default(); 2]; n];
-    py.detach(|| sampson::sampson_affine_grad_batch(f, rows, &mut out))
+    let (mut value, mut d_corrs, mut d_f) =
+        (vec![0.0; 2 * n], vec![0.0; 16 * n], vec![0.0; 18 * n]);
+    let value_rows = value.as_chunks_mut::<2>().0;
+    let d_rows = d_corrs.as_chunks_mut::<8>().0.as_chunks_mut::<2>().0;
+    let d_f_rows = d_f.as_chunks_mut::<9>().0.as_chunks_mut::<2>().0;
+    py.detach(|| sampson::sampson_affine_grad_columns(f, rows, value_rows, d_rows, d_f_rows))
         .map_err(value_error)?;
-    let grads = || out.iter().flatten();
     Ok((
-        to_numpy(py, &[n, 2], grads().map(|g| g.value).collect())?,
-        to_numpy(py, &[n, 2, 8], grads().flat_map(|g| g.d_row()).collect())?,
-        to_numpy(py, &[n, 2, 3, 3], grads().flat_map(|g| g.d_f).collect())?,
+        to_numpy(py, &[n, 2], value)?,
+        to_numpy(py, &[n, 2, 8], d_corrs)?,
+        to_numpy(py, &[n, 2, 3, 3], d_f)?,
     ))
 }

@@ -454,6 +454,122 @@ pub fn sampson_affine_grad_batch<'a>(
     })
 }
 
+/// [`batch::try_fill`] for three outputs (struct of arrays): `(a[i], b[i], c[i]) = f(i)`, with
+/// the same threshold, chunking and smallest-failing-index error. The `*_columns` forms use it to
+/// write straight into the caller's (e.g. numpy's) arrays, with no intermediate rows.
+fn try_fill3<A, B, C, F>(a: &mut [A], b: &mut [B], c: &mut [C], f: F) -> Result<()>
+where
+    A: Send,
+    B: Send,
+    C: Send,
+    F: Fn(usize) -> Result<(A, B, C)> + Sync,
+{
+    const CHUNK: usize = 1024;
+    debug_assert!(a.len() == b.len() && a.len() == c.len());
+    if a.len() < batch::PARALLEL_MIN_LEN {
+        for (i, ((x, y), z)) in a.iter_mut().zip(b.iter_mut()).zip(c.iter_mut()).enumerate() {
+            (*x, *y, *z) = f(i)?;
+        }
+        return Ok(());
+    }
+    use rayon::prelude::*;
+    let first_error = a
+        .par_chunks_mut(CHUNK)
+        .zip(b.par_chunks_mut(CHUNK))
+        .zip(c.par_chunks_mut(CHUNK))
+        .enumerate()
+        .filter_map(|(chunk, ((ca, cb), cc))| {
+            let rows = ca.iter_mut().zip(cb.iter_mut()).zip(cc.iter_mut());
+            for (k, ((x, y), z)) in rows.enumerate() {
+                match f(chunk * CHUNK + k) {
+                    Ok(v) => (*x, *y, *z) = v,
+                    Err(e) => return Some((chunk, e)),
+                }
+            }
+            None
+        })
+        .min_by_key(|(chunk, _)| *chunk);
+    first_error.map_or(Ok(()), |(_, e)| Err(e))
+}
+
+/// Runs `kernel(F_i, i)` into three outputs, checking the lengths and F's entries.
+fn run3<A, B, C, K>(
+    f: Fundamentals<'_>,
+    n: usize,
+    out: (&mut [A], &mut [B], &mut [C]),
+    kernel: K,
+) -> Result<()>
+where
+    A: Send,
+    B: Send,
+    C: Send,
+    K: Fn(&Mat3, usize) -> Result<(A, B, C)> + Sync,
+{
+    let (a, b, c) = out;
+    check_len("value", n, a.len())?;
+    check_len("d_corrs", n, b.len())?;
+    check_len("d_f", n, c.len())?;
+    match f {
+        Fundamentals::Shared(f) => {
+            check_f(f)?;
+            try_fill3(a, b, c, |i| kernel(f, i))
+        }
+        Fundamentals::PerRow(fs) => {
+            check_len("F", n, fs.len())?;
+            try_fill3(a, b, c, |i| {
+                if !fs[i].iter().all(|v| v.is_finite()) {
+                    return Err(GeomError::NonFinite {
+                        what: "F",
+                        index: i,
+                    });
+                }
+                kernel(&mat3_from_row(&fs[i]), i)
+            })
+        }
+    }
+}
+
+/// [`sampson_point_grad_batch`] with struct-of-arrays outputs, the layout of the Python
+/// bindings: `value (N)`, `d_corrs (N, W)` and `d_f (N, 3, 3)` row-major. `W ≥ 4` is the width
+/// of the caller's gradient rows: entries past the fourth (the A columns of an `(N, 8)` layout)
+/// are set to zero. Errors as [`sampson_point_batch`], naming the output that has the wrong
+/// length.
+pub fn sampson_point_grad_columns<'a, R: CorrespondenceRow, const W: usize>(
+    f: impl Into<Fundamentals<'a>>,
+    corrs: &[R],
+    value: &mut [f64],
+    d_corrs: &mut [[f64; W]],
+    d_f: &mut [[f64; 9]],
+) -> Result<()> {
+    const { assert!(W >= 4, "gradient rows hold at least x1, y1, x2, y2") };
+    run3(f.into(), corrs.len(), (value, d_corrs, d_f), |f, i| {
+        let g = sampson_point_grad(f, &point_of(corrs, i)?);
+        let mut row = [0.0; W];
+        row[..4].copy_from_slice(&g.d_row());
+        Ok((g.value, row, g.d_f))
+    })
+}
+
+/// [`sampson_affine_grad_batch`] with struct-of-arrays outputs, the layout of the Python
+/// bindings: `value (N, 2)`, `d_corrs (N, 2, 8)` and `d_f (N, 2, 3, 3)`, indexed by row n and
+/// constraint row k. Errors as [`sampson_point_grad_columns`].
+pub fn sampson_affine_grad_columns<'a>(
+    f: impl Into<Fundamentals<'a>>,
+    corrs: &[AcRow],
+    value: &mut [[f64; 2]],
+    d_corrs: &mut [[[f64; 8]; 2]],
+    d_f: &mut [[[f64; 9]; 2]],
+) -> Result<()> {
+    run3(f.into(), corrs.len(), (value, d_corrs, d_f), |f, i| {
+        let [g0, g1] = sampson_affine_grad(f, &ac_of(corrs, i)?);
+        Ok((
+            [g0.value, g1.value],
+            [g0.d_row(), g1.d_row()],
+            [g0.d_f, g1.d_f],
+        ))
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -713,6 +829,61 @@ mod tests {
                 assert_eq!(ag[i], sampson_affine_grad(&f, ac));
             }
         }
+    }
+
+    #[test]
+    fn column_outputs_equal_the_row_structs() {
+        let mut rng = Pcg64::seed_from_u64(18);
+        for n in [0, 9, batch::PARALLEL_MIN_LEN + 3] {
+            let (f, acs) = perturbed(&mut rng, n);
+            let rows: Vec<AcRow> = acs.iter().map(|a| a.to_row()).collect();
+            let per_row: Vec<[f64; 9]> = vec![mat3_to_row(&f); n];
+            let mut pg = vec![PointSampsonGrad::default(); n];
+            sampson_point_grad_batch(&f, &rows, &mut pg).unwrap();
+            let (mut v, mut dc, mut df) = (vec![0.0; n], vec![[1.0; 8]; n], vec![[0.0; 9]; n]);
+            sampson_point_grad_columns(&per_row, &rows, &mut v, &mut dc, &mut df).unwrap();
+            let mut ag = vec![[AffineSampsonGrad::default(); 2]; n];
+            sampson_affine_grad_batch(&f, &rows, &mut ag).unwrap();
+            let (mut av, mut adc, mut adf) = (
+                vec![[0.0; 2]; n],
+                vec![[[0.0; 8]; 2]; n],
+                vec![[[0.0; 9]; 2]; n],
+            );
+            sampson_affine_grad_columns(&f, &rows, &mut av, &mut adc, &mut adf).unwrap();
+            for i in 0..n {
+                assert_eq!(v[i], pg[i].value);
+                assert_eq!(dc[i][..4], pg[i].d_row());
+                assert_eq!(dc[i][4..], [0.0; 4]);
+                assert_eq!(df[i], pg[i].d_f);
+                for k in 0..2 {
+                    assert_eq!(av[i][k], ag[i][k].value);
+                    assert_eq!(adc[i][k], ag[i][k].d_row());
+                    assert_eq!(adf[i][k], ag[i][k].d_f);
+                }
+            }
+        }
+        // Errors: the first bad row whatever the thread count, and the output's name.
+        let n = 3 * batch::PARALLEL_MIN_LEN;
+        let mut rows = vec![[1.0, 2.0, 3.0, 4.0]; n];
+        rows[n - 5][2] = f64::NAN;
+        rows[batch::PARALLEL_MIN_LEN + 7][0] = f64::INFINITY;
+        let f = Mat3::identity();
+        let (mut v, mut dc, mut df) = (vec![0.0; n], vec![[0.0; 4]; n], vec![[0.0; 9]; n]);
+        assert_eq!(
+            sampson_point_grad_columns(&f, &rows, &mut v, &mut dc, &mut df),
+            Err(GeomError::NonFinite {
+                what: "corrs",
+                index: batch::PARALLEL_MIN_LEN + 7
+            })
+        );
+        assert_eq!(
+            sampson_point_grad_columns(&f, &rows, &mut v, &mut dc[1..], &mut df),
+            Err(GeomError::LengthMismatch {
+                what: "d_corrs",
+                expected: n,
+                got: n - 1
+            })
+        );
     }
 
     #[test]
