@@ -14,7 +14,9 @@ from conftest import random_scene
 torch = pytest.importorskip("torch", reason="torch (affcorr[train], Debian python3-torch) missing")
 
 from affcorr.losses import (  # noqa: E402 (after the importorskip)
+    AffineSampsonFunction,
     AffineSampsonLoss,
+    PointSampsonFunction,
     PointSampsonLoss,
     affine_sampson,
     point_sampson,
@@ -48,6 +50,10 @@ def test_kernels_agree_with_the_torch_reference(rng):
     sd = affine_sampson(F, corrs)
     assert sd.shape == (200, 2) and sd.dtype == torch.float64
     torch.testing.assert_close(sd, reference_affine_sampson(F, corrs), **tol)
+    # The autograd Functions behind the functional forms.
+    torch.testing.assert_close(AffineSampsonFunction.apply(F, corrs), sd, rtol=0, atol=0)
+    torch.testing.assert_close(PointSampsonFunction.apply(F, corrs), point_sampson(F, corrs),
+                               rtol=0, atol=0)
     # ... and with the numpy-facing bindings.
     np.testing.assert_array_equal(sd.numpy(), affcorr.sampson_affine(F.numpy(), corrs.numpy()))
 

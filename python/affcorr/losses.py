@@ -4,9 +4,10 @@ torch comes from Debian's ``python3-torch`` (DESIGN.md §7); it is never importe
 ``import affcorr``, only by ``import affcorr.losses``.
 
 - :func:`point_sampson` ``(F, corrs) -> (N,)``: SD_P per row, differentiable w.r.t. ``F`` and
-  ``corrs``.
+  ``corrs`` (the autograd Function is :class:`PointSampsonFunction`).
 - :func:`affine_sampson` ``(F, corrs) -> (N, 2)``: SD_A,k per row k of the affine epipolar
-  constraint ``A^T (F p1)[:2] + (F^T p2)[:2] = 0``; SD_A is the sum of the two columns.
+  constraint ``A^T (F p1)[:2] + (F^T p2)[:2] = 0``; SD_A is the sum of the two columns
+  (:class:`AffineSampsonFunction`).
 - :class:`PointSampsonLoss` and :class:`AffineSampsonLoss`: the positive means
   L_pc = mean SD_P and L_aff = mean SD_A (DESIGN.md §3; the paper's minus sign is a typo).
 - :func:`reference_point_sampson`, :func:`reference_affine_sampson`: the same distances in plain
@@ -32,7 +33,9 @@ from torch.autograd.function import once_differentiable
 from . import _native
 
 __all__ = [
+    "AffineSampsonFunction",
     "AffineSampsonLoss",
+    "PointSampsonFunction",
     "PointSampsonLoss",
     "affine_sampson",
     "point_sampson",
@@ -73,7 +76,9 @@ def _grad_corrs(ctx, g: torch.Tensor) -> torch.Tensor:
     return g.to(device=device, dtype=dtype)
 
 
-class _PointSampson(torch.autograd.Function):
+class PointSampsonFunction(torch.autograd.Function):
+    """``apply(F, corrs) -> (N,)``: SD_P with the Rust kernel's analytic gradients."""
+
     @staticmethod
     def forward(ctx, F, corrs):  # noqa: N803 (F is the fundamental matrix)
         f, c = _to_numpy(F), _to_numpy(corrs)
@@ -96,7 +101,9 @@ class _PointSampson(torch.autograd.Function):
         return g_F, g_corrs
 
 
-class _AffineSampson(torch.autograd.Function):
+class AffineSampsonFunction(torch.autograd.Function):
+    """``apply(F, corrs) -> (N, 2)``: SD_A,k with the Rust kernel's analytic gradients."""
+
     @staticmethod
     def forward(ctx, F, corrs):  # noqa: N803
         f, c = _to_numpy(F), _to_numpy(corrs)
@@ -124,7 +131,7 @@ def point_sampson(F, corrs) -> torch.Tensor:  # noqa: N803
 
     Differentiable w.r.t. both arguments; for (N, 8) input the A columns get zero gradient.
     """
-    return _PointSampson.apply(_as_tensor(F), _as_tensor(corrs))
+    return PointSampsonFunction.apply(_as_tensor(F), _as_tensor(corrs))
 
 
 def affine_sampson(F, corrs) -> torch.Tensor:  # noqa: N803
@@ -132,7 +139,7 @@ def affine_sampson(F, corrs) -> torch.Tensor:  # noqa: N803
 
     Differentiable w.r.t. both arguments. SD_A is ``affine_sampson(F, corrs).sum(-1)``.
     """
-    return _AffineSampson.apply(_as_tensor(F), _as_tensor(corrs))
+    return AffineSampsonFunction.apply(_as_tensor(F), _as_tensor(corrs))
 
 
 def _reduce(x: torch.Tensor, reduction: str) -> torch.Tensor:

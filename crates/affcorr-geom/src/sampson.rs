@@ -1,33 +1,51 @@
 //! Point and affine Sampson distances with analytic gradients (DESIGN.md §3).
 //!
+//! API: scalar forms for hot loops ([`sampson_point`], [`sampson_affine`] and their `_grad`
+//! twins returning [`PointSampsonGrad`] / [`AffineSampsonGrad`]; no allocation, no checks), and
+//! batched forms over `(N, 4)` / `(N, 8)` rows with one F for all rows or one per row
+//! ([`Fundamentals`]), writing into caller-owned slices: `*_batch` (rows of values or gradient
+//! structs) and `*_grad_columns` (struct of arrays, the layout of the Python bindings).
+//!
+//! # Derivation
+//!
 //! Notation: p = (x, y, 1)ᵀ, l1 = F p1 and l2 = Fᵀ p2 (the epipolar lines of x1 in image 2 and
-//! of x2 in image 1); indices i, j, k, n run over {0, 1} unless they index F (m, n ∈ {0, 1, 2}).
-//! F is row-major everywhere (`F[m][n]`), A = ∂x2/∂x1 row-major (a₀₀, a₀₁, a₁₀, a₁₁).
+//! of x2 in image 1). Indices i, j, k run over {0, 1}; m, n over {0, 1, 2} when they index F.
+//! `[c]` is 1 when the condition c holds, else 0. F is row-major everywhere (`F[m][n]`), and
+//! A = ∂x2/∂x1 is row-major (a₀₀, a₀₁, a₁₀, a₁₁) as in DESIGN.md §2.
 //!
-//! **Point.** e = p2ᵀ F p1 = p2 · l1 = p1 · l2, D = l1₀² + l1₁² + l2₀² + l2₁², SD_P = e² / D.
-//! - ∂e/∂x1_j = l2_j, ∂e/∂x2_j = l1_j, ∂e/∂F_mn = p2_m p1_n.
-//! - ∂D/∂x1_j = 2 Σ_i l1_i F_ij, ∂D/∂x2_j = 2 Σ_k l2_k F_jk,
-//!   ∂D/∂F_mn = 2 [m<2] l1_m p1_n + 2 [n<2] l2_n p2_m.
+//! **Point.** SD_P = e² / D with
 //!
-//! **Affine**, per row k (DESIGN.md §2): r_k = Σ_i a_ik l1_i + l2_k. Its partials are
-//! ∂r_k/∂x1_j = B_kj with B = Aᵀ F[0:2,0:2] (B_kj = Σ_i a_ik F_ij), ∂r_k/∂x2_j = F_jk,
-//! ∂r_k/∂a_ik = l1_i (zero for the other column of A), ∂r_k/∂F_mn = [m<2] a_mk p1_n + [n=k] p2_m.
-//! The denominator is the squared norm of the first three groups,
-//! G_k = B_k0² + B_k1² + F_0k² + F_1k² + l1_0² + l1_1², and SD_A,k = r_k² / G_k. Then
-//! - ∂G_k/∂x1_j = 2 Σ_i l1_i F_ij, ∂G_k/∂x2_j = 0, ∂G_k/∂a_ik = 2 Σ_j B_kj F_ij,
-//! - ∂G_k/∂F_mn = 2 [m<2] ( [n<2] B_kn a_mk + [n=k] F_mk + l1_m p1_n ).
+//! ```text
+//! e = p2ᵀ F p1 = p2 · l1 = p1 · l2          D = l1_0² + l1_1² + l2_0² + l2_1²
+//! ∂e/∂x1_j = l2_j    ∂e/∂x2_j = l1_j    ∂e/∂F_mn = p2_m p1_n
+//! ∂D/∂x1_j = 2 Σ_i l1_i F_ij    ∂D/∂x2_j = 2 Σ_k l2_k F_jk
+//! ∂D/∂F_mn = 2 [m<2] l1_m p1_n + 2 [n<2] l2_n p2_m
+//! ```
+//!
+//! **Affine**, per constraint row k (DESIGN.md §2): SD_A,k = r_k² / G_k, where G_k is the
+//! squared norm of ∂r_k/∂(x1, y1, x2, y2, a_0k, a_1k). With B = Aᵀ F[0:2, 0:2], i.e.
+//! B_kj = Σ_i a_ik F_ij:
+//!
+//! ```text
+//! r_k = Σ_i a_ik l1_i + l2_k
+//! ∂r_k/∂x1_j = B_kj    ∂r_k/∂x2_j = F_jk    ∂r_k/∂a_ik = l1_i   (0 for column 1−k of A)
+//! ∂r_k/∂F_mn = [m<2] a_mk p1_n + [n=k] p2_m
+//! G_k = B_k0² + B_k1² + F_0k² + F_1k² + l1_0² + l1_1²
+//! ∂G_k/∂x1_j = 2 Σ_i l1_i F_ij    ∂G_k/∂x2_j = 0    ∂G_k/∂a_ik = 2 Σ_j B_kj F_ij
+//! ∂G_k/∂F_mn = 2 [m<2] ([n<2] B_kn a_mk + [n=k] F_mk + l1_m p1_n)
+//! ```
 //!
 //! (paper fix: the supplement's printed partials have typos; these are derived from the
 //! definitions and checked against central finite differences in the tests.)
 //!
-//! **Gradients.** For SD = r²/G with s = r/G: ∂SD = 2 s ∂r − s² ∂G, which is what every
-//! `*_grad` function evaluates with the products l1, l2 and B computed once.
+//! **Gradients.** For SD = r²/G and s = r/G, ∂SD = 2 s ∂r − s² ∂G, which is what every
+//! `*_grad` function evaluates, with the products l1, l2 and B computed once.
 //!
 //! **Degenerate denominators.** D = 0 (or G_k = 0) happens only for special F (e.g. when
 //! l1 and l2 both vanish in their first two coordinates). The distance is then `0.0` when the
-//! residual is also exactly 0 (the constraint holds), and `+∞` otherwise (the point cannot be
-//! explained by any nearby correspondence); the gradient is reported as all zeros in both cases.
-//! NaN never comes out of finite inputs. The scalar forms do not check their inputs (NaN in,
+//! residual is also exactly 0 (the constraint holds), and `+∞` otherwise (no nearby
+//! correspondence explains it); the gradient is reported as all zeros in both cases. So finite
+//! inputs never give NaN (barring overflow). The scalar forms do not check their inputs (NaN in,
 //! NaN out); the batched forms reject non-finite inputs with [`GeomError::NonFinite`].
 //!
 //! The distances are invariant to the scale (and sign) of F, so the gradient w.r.t. F is
