@@ -1,10 +1,11 @@
 //! Point and affine Sampson distances with analytic gradients (DESIGN.md §3).
 //!
-//! API: scalar forms for hot loops ([`sampson_point`], [`sampson_affine`] and their `_grad`
-//! twins returning [`PointSampsonGrad`] / [`AffineSampsonGrad`]; no allocation, no checks), and
-//! batched forms over `(N, 4)` / `(N, 8)` rows with one F for all rows or one per row
-//! ([`Fundamentals`]), writing into caller-owned slices: `*_batch` (rows of values or gradient
-//! structs) and `*_grad_columns` (struct of arrays, the layout of the Python bindings).
+//! API: scalar forms for hot loops ([`sampson_point`], [`sampson_affine`], the fused
+//! [`sampson_point_affine`], and the `_grad` twins returning [`PointSampsonGrad`] /
+//! [`AffineSampsonGrad`]; no allocation, no checks), and batched forms over `(N, 4)` / `(N, 8)`
+//! rows with one F for all rows or one per row ([`Fundamentals`]), writing into caller-owned
+//! slices: `*_batch` (rows of values or gradient structs) and `*_grad_columns` (struct of
+//! arrays, the layout of the Python bindings).
 //!
 //! # Derivation
 //!
@@ -244,6 +245,8 @@ struct AffineTerms {
     p1: [f64; 3],
     p2: [f64; 3],
     l1: [f64; 3],
+    /// The first two entries of l2 = Fᵀ p2.
+    l2: [f64; 2],
     /// A row-major.
     a: [[f64; 2]; 2],
     /// B = Aᵀ F[0:2,0:2]: B[k][j] = Σ_i a_ik F_ij.
@@ -276,6 +279,7 @@ fn affine_terms(f: &Mat3, ac: &AffineCorrespondence) -> AffineTerms {
         p1: [x1[0], x1[1], 1.0],
         p2: [x2[0], x2[1], 1.0],
         l1,
+        l2,
         a,
         b,
         r,
@@ -307,6 +311,17 @@ fn affine_terms(f: &Mat3, ac: &AffineCorrespondence) -> AffineTerms {
 pub fn sampson_affine(f: &Mat3, ac: &AffineCorrespondence) -> [f64; 2] {
     let t = affine_terms(f, ac);
     [ratio(t.r[0], t.g[0]), ratio(t.r[1], t.g[1])]
+}
+
+/// `(SD_P, [SD_A,0, SD_A,1])` of one AC, sharing F p1 and Fᵀ p2: bit-identical to
+/// [`sampson_point`] and [`sampson_affine`], for residuals that mix the two (DESIGN.md §5).
+#[inline]
+pub fn sampson_point_affine(f: &Mat3, ac: &AffineCorrespondence) -> (f64, [f64; 2]) {
+    let t = affine_terms(f, ac);
+    let (l1, l2) = (&t.l1, &t.l2);
+    let e = t.p2[0] * l1[0] + t.p2[1] * l1[1] + l1[2];
+    let d = l1[0] * l1[0] + l1[1] * l1[1] + l2[0] * l2[0] + l2[1] * l2[1];
+    (ratio(e, d), [ratio(t.r[0], t.g[0]), ratio(t.r[1], t.g[1])])
 }
 
 /// Both SD_A,k and their gradients w.r.t. x1, x2, A and F (see the module docs).
@@ -788,6 +803,19 @@ mod tests {
         }
         eprintln!("worst relative gradient error: {worst:e}");
         assert!(worst < 1e-6, "{worst}");
+    }
+
+    #[test]
+    fn fused_point_and_affine_equal_the_separate_calls() {
+        let mut rng = Pcg64::seed_from_u64(19);
+        for _ in 0..10 {
+            let (f, acs) = perturbed(&mut rng, 20);
+            for ac in &acs {
+                let (p, a) = sampson_point_affine(&f, ac);
+                assert_eq!(p, sampson_point(&f, &ac.points()));
+                assert_eq!(a, sampson_affine(&f, ac));
+            }
+        }
     }
 
     #[test]
