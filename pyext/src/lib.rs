@@ -14,6 +14,7 @@ use pyo3::prelude::*;
 
 mod arrays;
 mod geom;
+mod ransac;
 mod sampson;
 mod solvers;
 
@@ -21,6 +22,7 @@ mod solvers;
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     geom::register(m)?;
+    ransac::register(m)?;
     sampson::register(m)?;
     solvers::register(m)?;
     Ok(())

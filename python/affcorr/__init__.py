@@ -38,9 +38,29 @@ from ._native import (
     sampson_point_grad,
     synthesize_affine,
 )
+from .estimation import (
+    ESTIMATOR_OPTIONS,
+    RansacInfo,
+    RelativePose,
+    estimate_fundamental,
+    estimate_fundamental_batch,
+    estimate_homography,
+    estimate_homography_batch,
+    estimate_relative_pose,
+    estimate_relative_pose_batch,
+)
 
 __all__ = [
     "__version__",
+    "ESTIMATOR_OPTIONS",
+    "RansacInfo",
+    "RelativePose",
+    "estimate_fundamental",
+    "estimate_fundamental_batch",
+    "estimate_homography",
+    "estimate_homography_batch",
+    "estimate_relative_pose",
+    "estimate_relative_pose_batch",
     "affine_from_homography",
     "affine_to_laf",
     "correspondences_from_homography",

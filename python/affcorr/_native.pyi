@@ -6,6 +6,9 @@ ACs are ``(N, 8)`` rows ``[x1, y1, x2, y2, a11, a12, a21, a22]`` with ``A = dx2/
 Bad inputs raise ``ValueError`` naming the argument.
 """
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -132,3 +135,50 @@ def fundamental_3ac(corrs: ArrayLike) -> list[NDArray[np.float64]]:
 def fundamental_ac_lsq(corrs: ArrayLike) -> list[NDArray[np.float64]]:
     """Non-minimal F from N >= 3 ACs (N, 8): the fundamental_3ac system over all ACs, least
     squares, rank 2 enforced."""
+
+# --- robust estimation (issue #4) ---------------------------------------------------------------
+# The raw bindings; affcorr.estimation wraps them into (model, RansacInfo) pairs and documents
+# the options. `options` are keyword options (see ESTIMATOR_OPTIONS), validated in Rust: an
+# unknown name or an invalid value raises ValueError naming it. Each info dict has the keys
+# inliers ((N,) bool), num_inliers, num_iterations, score, lo_runs, refinements. When no model is
+# found the model is NaN and num_inliers is 0 (no exception).
+
+ESTIMATOR_OPTIONS: list[str]
+
+def estimate_homography(
+    corrs: ArrayLike, **options: Any
+) -> tuple[NDArray[np.float64], dict[str, Any]]:
+    """Robust H (3, 3), p2 ~ H p1, from (N, 8) ACs or (N, 4) points; GIL released."""
+
+def estimate_fundamental(
+    corrs: ArrayLike, **options: Any
+) -> tuple[NDArray[np.float64], dict[str, Any]]:
+    """Robust F (3, 3), p2^T F p1 = 0, from (N, 8) ACs or (N, 4) points; GIL released."""
+
+def estimate_relative_pose(
+    corrs: ArrayLike, K1: ArrayLike, K2: ArrayLike, **options: Any
+) -> tuple[
+    tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+    dict[str, Any],
+]:
+    """Robust X2 = R X1 + t: ((R, t, E, F), info); |t| = 1; GIL released."""
+
+def estimate_homography_batch(
+    corrs: Sequence[ArrayLike], **options: Any
+) -> list[tuple[NDArray[np.float64], dict[str, Any]]]:
+    """estimate_homography over many pairs in parallel (rayon); quality is one array per pair."""
+
+def estimate_fundamental_batch(
+    corrs: Sequence[ArrayLike], **options: Any
+) -> list[tuple[NDArray[np.float64], dict[str, Any]]]:
+    """estimate_fundamental over many pairs in parallel (rayon)."""
+
+def estimate_relative_pose_batch(
+    corrs: Sequence[ArrayLike], K1: ArrayLike, K2: ArrayLike, **options: Any
+) -> list[
+    tuple[
+        tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
+        dict[str, Any],
+    ]
+]:
+    """estimate_relative_pose over many pairs in parallel; K1, K2: one (3, 3) or one per pair."""

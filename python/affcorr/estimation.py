@@ -1,0 +1,327 @@
+"""Robust estimation, PoseLib-like: each ``estimate_*`` returns ``(model, info)``.
+
+The estimators run in Rust (``affcorr-ransac``) with the GIL released: a hypothesise-and-verify
+loop with adaptive termination, local optimisation and a final refinement (DESIGN.md §5).
+
+- ``corrs`` is ``(N, 8)`` ACs ``[x1, y1, x2, y2, a11, a12, a21, a22]`` (``A = dx2/dx1``) or
+  ``(N, 4)`` points ``[x1, y1, x2, y2]``, in pixels. ACs are sampled 2 at a time for H and E
+  and 3 at a time for F; points 4, 7 and 5 at a time.
+- ``threshold`` is the inlier threshold in pixels: on the transfer error for homographies and on
+  the Sampson distance for fundamental matrices and relative poses. About 3 sigma of the keypoint
+  noise is a good value.
+- Every other option is a keyword argument (all have defaults):
+
+  ====================== ============ =========================================================
+  option                 default      meaning
+  ====================== ============ =========================================================
+  ``sample``             ``None``     ``"affine"`` (minimal samples of ACs) or ``"points"``;
+                                      ``None``: ACs for ``(N, 8)`` data, points for ``(N, 4)``
+  ``sampler``            ``"uniform"`` ``"uniform"`` or ``"prosac"`` (needs ``quality``)
+  ``quality``            ``None``     ``(N,)`` per-correspondence quality for PROSAC, higher is
+                                      better (e.g. matcher certainty); in the batch forms a
+                                      list with one ``(N_i,)`` array per pair
+  ``scoring``            ``"msac"``   the score of a model (MSAC, the truncated quadratic)
+  ``confidence``         ``0.9999``   confidence of the adaptive stopping rule, in (0, 1)
+  ``min_iterations``     ``0``        never fewer iterations
+  ``max_iterations``     ``10000``    never more iterations
+  ``local_optimization`` ``True``     iterated least squares on the inliers of each new best
+  ``lo_iterations``      ``10``       most refits in one local optimisation
+  ``final_refinement``   ``True``     polish the final model on its inliers
+  ``affine_weight``      ``0.0``      weight of the affine residual in scoring (``(N, 8)``
+                                      only; 0: points only); see the Rust problem docs
+  ====================== ============ =========================================================
+
+  ``affcorr.ESTIMATOR_OPTIONS`` lists the names. An unknown name raises ``ValueError``.
+- Invalid input raises ``ValueError`` naming the argument or option: a bad shape, NaN or
+  infinity, an invalid ``K``, ``threshold <= 0``, fewer correspondences than a minimal sample,
+  PROSAC without ``quality`` or with the wrong length, ``sample="affine"`` with ``(N, 4)`` data.
+- When no model is found (every sample degenerate, or no inlier at all), nothing is raised: as
+  in PoseLib, ``info.num_inliers == 0`` and ``info.inliers`` is all ``False``; the model is
+  filled with NaN so that it cannot be used by mistake. Check ``info.num_inliers``.
+- The same data, options and ``seed`` give bit-identical results.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import _native
+
+__all__ = [
+    "ESTIMATOR_OPTIONS",
+    "RansacInfo",
+    "RelativePose",
+    "estimate_fundamental",
+    "estimate_fundamental_batch",
+    "estimate_homography",
+    "estimate_homography_batch",
+    "estimate_relative_pose",
+    "estimate_relative_pose_batch",
+]
+
+#: Names of the keyword options (besides ``threshold`` and ``seed``) that every estimator takes.
+ESTIMATOR_OPTIONS: tuple[str, ...] = tuple(_native.ESTIMATOR_OPTIONS)
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class RansacInfo:
+    """What a robust estimation did.
+
+    Attributes:
+        inliers: ``(N,)`` bool, the inliers of the returned model.
+        num_inliers: their number (0 when no model was found).
+        num_iterations: minimal samples drawn.
+        score: the model's score (MSAC: the sum over data of ``max(0, 1 - r^2 / threshold^2)``;
+            higher is better).
+        lo_runs: local optimisations run.
+        refinements: 1 if the final refinement improved the model, else 0.
+    """
+
+    inliers: NDArray[np.bool_]
+    num_inliers: int
+    num_iterations: int
+    score: float
+    lo_runs: int
+    refinements: int
+
+    @property
+    def inlier_ratio(self) -> float:
+        """num_inliers / N (0 for empty input)."""
+        return self.num_inliers / len(self.inliers) if len(self.inliers) else 0.0
+
+    def __repr__(self) -> str:
+        return (
+            f"RansacInfo(num_inliers={self.num_inliers}/{len(self.inliers)}, "
+            f"num_iterations={self.num_iterations}, score={self.score:.4g}, "
+            f"lo_runs={self.lo_runs}, refinements={self.refinements})"
+        )
+
+
+@dataclass(frozen=True, eq=False, repr=False)
+class RelativePose:
+    """A relative pose ``X2 = R X1 + t`` with ``|t| = 1``.
+
+    Attributes:
+        R: ``(3, 3)`` rotation.
+        t: ``(3,)`` unit translation (the scale is unobservable).
+        E: ``(3, 3)`` essential matrix ``[t]x R``.
+        F: ``(3, 3)`` fundamental matrix ``K2^-T E K1^-1`` (pixels), ``p2^T F p1 = 0``.
+    """
+
+    R: NDArray[np.float64]
+    t: NDArray[np.float64]
+    E: NDArray[np.float64]
+    F: NDArray[np.float64]
+
+    @property
+    def angle(self) -> float:
+        """The rotation angle in radians."""
+        return float(np.arccos(np.clip((np.trace(self.R) - 1.0) / 2.0, -1.0, 1.0)))
+
+    def __repr__(self) -> str:
+        t = np.array2string(self.t, precision=4, suppress_small=True, separator=", ")
+        return f"RelativePose(angle={np.degrees(self.angle):.4g} deg, t={t})"
+
+
+def _info(d: dict[str, Any]) -> RansacInfo:
+    return RansacInfo(**d)
+
+
+def _pose(m: tuple[np.ndarray, ...]) -> RelativePose:
+    return RelativePose(*m)
+
+
+def estimate_homography(
+    corrs: ArrayLike, *, threshold: float = 1.0, seed: int = 0, **options: Any
+) -> tuple[NDArray[np.float64], RansacInfo]:
+    """Robust homography ``p2 ~ H p1`` (pixels, ``|H|_F = 1``) from ACs or points.
+
+    Args:
+        corrs: ``(N, 8)`` ACs (2-AC samples by default) or ``(N, 4)`` points (4-point samples).
+        threshold: inlier threshold on the transfer error ``|x2 - H(x1)|``, pixels.
+        seed: seed of the random generator.
+        **options: see the module docstring (``sample``, ``sampler``, ``quality``, ...).
+
+    Returns:
+        ``(H, info)``: the ``(3, 3)`` homography and a :class:`RansacInfo`.
+
+    Example:
+        >>> import numpy as np, affcorr
+        >>> H = np.array([[1.1, 0.05, 12.0], [-0.02, 0.95, -7.0], [2e-4, -1e-4, 1.0]])
+        >>> x1 = np.random.default_rng(0).uniform(0, 640, (200, 2))
+        >>> corrs = affcorr.correspondences_from_homography(H, x1)  # exact ACs (200, 8)
+        >>> corrs[150:, 2:4] += 50.0  # 50 outliers
+        >>> H_est, info = affcorr.estimate_homography(corrs, threshold=2.0)
+        >>> info.num_inliers, bool(info.inliers[:150].all())
+        (150, True)
+        >>> bool(np.allclose(H_est / H_est[2, 2], H, atol=1e-6))
+        True
+    """
+    h, info = _native.estimate_homography(corrs, threshold=threshold, seed=seed, **options)
+    return h, _info(info)
+
+
+def estimate_fundamental(
+    corrs: ArrayLike, *, threshold: float = 1.0, seed: int = 0, **options: Any
+) -> tuple[NDArray[np.float64], RansacInfo]:
+    """Robust fundamental matrix ``p2^T F p1 = 0`` (pixels, ``|F|_F = 1``, rank 2).
+
+    The correspondences must not all lie on one plane (a plane makes F ambiguous).
+
+    Args:
+        corrs: ``(N, 8)`` ACs (3-AC samples by default) or ``(N, 4)`` points (7-point samples).
+        threshold: inlier threshold on the Sampson distance, pixels.
+        seed: seed of the random generator.
+        **options: see the module docstring.
+
+    Returns:
+        ``(F, info)``: the ``(3, 3)`` fundamental matrix and a :class:`RansacInfo`.
+
+    Example (two planes seen by two cameras, ``X2 = R X1 + t``):
+        >>> import numpy as np, affcorr
+        >>> K = np.array([[800.0, 0, 320], [0, 760, 240], [0, 0, 1]])
+        >>> c, s = np.cos(0.1), np.sin(0.1)
+        >>> R, t = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]), np.array([-1.0, 0.1, 0.2])
+        >>> def plane(n, d):  # the homography induced by the plane n^T X1 = d
+        ...     return K @ (R + np.outer(t, n) / d) @ np.linalg.inv(K)
+        >>> rng = np.random.default_rng(0)
+        >>> corrs = np.vstack([affcorr.correspondences_from_homography(
+        ...     plane(n, d), rng.uniform(0, 480, (100, 2))) for n, d in
+        ...     [((0, 0, 1.0), 5.0), ((0.6, 0, 0.8), 4.0), ((0, 0.6, 0.8), 6.0)]])
+        >>> F, info = affcorr.estimate_fundamental(corrs, threshold=1.0)
+        >>> p1, p2 = np.c_[corrs[:, :2], np.ones(300)], np.c_[corrs[:, 2:4], np.ones(300)]
+        >>> info.num_inliers, bool(np.abs(np.sum(p2 * (p1 @ F.T), axis=1)).max() < 1e-6)
+        (300, True)
+    """
+    f, info = _native.estimate_fundamental(corrs, threshold=threshold, seed=seed, **options)
+    return f, _info(info)
+
+
+def estimate_relative_pose(
+    corrs: ArrayLike,
+    K1: ArrayLike,  # noqa: N803 (intrinsics are capitals by convention)
+    K2: ArrayLike,  # noqa: N803
+    *,
+    threshold: float = 1.0,
+    seed: int = 0,
+    **options: Any,
+) -> tuple[RelativePose, RansacInfo]:
+    """Robust calibrated relative pose ``X2 = R X1 + t`` from pixel correspondences.
+
+    ACs are normalised with the full intrinsics (``A' = K2[:2,:2]^-1 A K1[:2,:2]``), so
+    ``fx != fy`` is handled exactly. The pose is the factorisation of the final essential matrix
+    with the most inliers in front of both cameras.
+
+    Args:
+        corrs: ``(N, 8)`` ACs (2-AC samples by default) or ``(N, 4)`` points (5-point samples).
+        K1, K2: ``(3, 3)`` intrinsics of the two cameras (upper triangular).
+        threshold: inlier threshold on the Sampson distance of ``F = K2^-T E K1^-1``, pixels.
+        seed: seed of the random generator.
+        **options: see the module docstring.
+
+    Returns:
+        ``(pose, info)``: a :class:`RelativePose` (``R``, unit ``t``, ``E``, ``F``) and a
+        :class:`RansacInfo`.
+
+    Example (two planes seen by two cameras):
+        >>> import numpy as np, affcorr
+        >>> K = np.array([[800.0, 0, 320], [0, 760, 240], [0, 0, 1]])
+        >>> c, s = np.cos(0.1), np.sin(0.1)
+        >>> R, t = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]]), np.array([-1.0, 0.1, 0.2])
+        >>> def plane(n, d):  # the homography induced by the plane n^T X1 = d
+        ...     return K @ (R + np.outer(t, n) / d) @ np.linalg.inv(K)
+        >>> rng = np.random.default_rng(0)
+        >>> corrs = np.vstack([affcorr.correspondences_from_homography(
+        ...     plane(n, d), rng.uniform(0, 480, (100, 2))) for n, d in
+        ...     [((0, 0, 1.0), 5.0), ((0.6, 0, 0.8), 4.0)]])
+        >>> pose, info = affcorr.estimate_relative_pose(corrs, K, K, threshold=1.0)
+        >>> pose
+        RelativePose(angle=5.73 deg, t=[-0.9759,  0.0976,  0.1952])
+        >>> info.num_inliers, bool(np.allclose(pose.R, R, atol=1e-6))
+        (200, True)
+    """
+    m, info = _native.estimate_relative_pose(
+        corrs, K1, K2, threshold=threshold, seed=seed, **options
+    )
+    return _pose(m), _info(info)
+
+
+def estimate_homography_batch(
+    corrs: Sequence[ArrayLike], *, threshold: float = 1.0, seed: int = 0, **options: Any
+) -> list[tuple[NDArray[np.float64], RansacInfo]]:
+    """:func:`estimate_homography` over many image pairs, in parallel in Rust (rayon; the GIL
+    is released; ``RAYON_NUM_THREADS`` caps the threads). Each pair gets the same options and
+    seed, so each result equals the single-pair call's. ``quality`` is a list, one ``(N_i,)``
+    array per pair. Invalid input in any pair raises ``ValueError`` naming the pair.
+
+    Example:
+        >>> import numpy as np, affcorr
+        >>> x1 = np.random.default_rng(0).uniform(0, 640, (100, 2))
+        >>> pairs = [affcorr.correspondences_from_homography(np.diag([s, s, 1.0]), x1)
+        ...          for s in (0.9, 1.0, 1.1)]
+        >>> out = affcorr.estimate_homography_batch(pairs)
+        >>> [round(float(H[0, 0] / H[2, 2]), 6) for H, _ in out]
+        [0.9, 1.0, 1.1]
+    """
+    out = _native.estimate_homography_batch(corrs, threshold=threshold, seed=seed, **options)
+    return [(h, _info(i)) for h, i in out]
+
+
+def estimate_fundamental_batch(
+    corrs: Sequence[ArrayLike], *, threshold: float = 1.0, seed: int = 0, **options: Any
+) -> list[tuple[NDArray[np.float64], RansacInfo]]:
+    """:func:`estimate_fundamental` over many image pairs, in parallel in Rust (GIL released).
+
+    Options as in :func:`estimate_homography_batch`.
+
+    Example:
+        >>> import numpy as np, affcorr
+        >>> rng = np.random.default_rng(0)
+        >>> pairs = [rng.uniform(0, 640, (50, 4)) for _ in range(2)]  # pure outliers
+        >>> [len(info.inliers) for _, info in affcorr.estimate_fundamental_batch(pairs)]
+        [50, 50]
+    """
+    out = _native.estimate_fundamental_batch(corrs, threshold=threshold, seed=seed, **options)
+    return [(f, _info(i)) for f, i in out]
+
+
+def estimate_relative_pose_batch(
+    corrs: Sequence[ArrayLike],
+    K1: ArrayLike,  # noqa: N803
+    K2: ArrayLike,  # noqa: N803
+    *,
+    threshold: float = 1.0,
+    seed: int = 0,
+    **options: Any,
+) -> list[tuple[RelativePose, RansacInfo]]:
+    """:func:`estimate_relative_pose` over many image pairs, in parallel in Rust (GIL released).
+
+    Args:
+        corrs: a sequence of ``(N_i, 8)`` or ``(N_i, 4)`` arrays.
+        K1, K2: one ``(3, 3)`` for every pair, or a sequence (or ``(B, 3, 3)`` array) with one
+            per pair.
+        threshold, seed, **options: as in :func:`estimate_relative_pose`, shared by the pairs
+            (``quality``: one array per pair).
+
+    Example:
+        >>> import numpy as np, affcorr
+        >>> K = np.array([[800.0, 0, 320], [0, 760, 240], [0, 0, 1]])
+        >>> rng = np.random.default_rng(0)
+        >>> def pair(t):  # two planes n^T X1 = d, X2 = X1 + t
+        ...     hs = [K @ (np.eye(3) + np.outer(t, n) / d) @ np.linalg.inv(K)
+        ...           for n, d in [((0, 0, 1.0), 5.0), ((0.6, 0, 0.8), 4.0)]]
+        ...     x1 = rng.uniform(0, 480, (50, 2))
+        ...     return np.vstack([affcorr.correspondences_from_homography(h, x1) for h in hs])
+        >>> out = affcorr.estimate_relative_pose_batch([pair([1.0, 0, 0]), pair([0, 1.0, 0])], K, K)
+        >>> [(pose.t.round(6) + 0.0).tolist() for pose, _ in out]
+        [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    """
+    out = _native.estimate_relative_pose_batch(
+        corrs, K1, K2, threshold=threshold, seed=seed, **options
+    )
+    return [(_pose(m), _info(i)) for m, i in out]
