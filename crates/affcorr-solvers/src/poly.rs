@@ -79,7 +79,11 @@ struct Sturm {
 
 impl Sturm {
     fn new(p: &[f64]) -> Self {
-        let mut s = Sturm { seq: [[0.0; LEN]; LEN], deg: [0; LEN], len: 2 };
+        let mut s = Sturm {
+            seq: [[0.0; LEN]; LEN],
+            deg: [0; LEN],
+            len: 2,
+        };
         let d = p.len() - 1;
         // Monic p keeps the remainders well scaled.
         let lead = p[d];
@@ -177,11 +181,16 @@ fn sturm_roots(p: &[f64], roots: &mut [f64]) -> usize {
     count
 }
 
-/// The single root of p in (a, b]: Newton steps kept inside a shrinking bracket.
+/// The single root of p in (a, b]: Newton steps kept inside a shrinking bracket, with a
+/// bisection whenever Newton leaves the bracket or fails to halve the step (Numerical Recipes'
+/// `rtsafe`). Without the fallback, Newton from far outside a root of a degree-d polynomial
+/// only gains a factor (1 − 1/d) per step and can stop short of the root.
 fn refine(p: &[f64], mut a: f64, mut b: f64) -> f64 {
     let fa = eval(p, a);
     let mut x = 0.5 * (a + b);
-    for _ in 0..100 {
+    let mut step_old = b - a;
+    let mut step = step_old;
+    for _ in 0..200 {
         let (f, df) = eval_with_derivative(p, x);
         if f == 0.0 {
             return x;
@@ -193,8 +202,16 @@ fn refine(p: &[f64], mut a: f64, mut b: f64) -> f64 {
             b = x;
         }
         let newton = x - f / df;
-        let next = if df != 0.0 && newton > a && newton < b { newton } else { 0.5 * (a + b) };
-        if (next - x).abs() <= 1e-15 * x.abs().max(1e-300) {
+        let next =
+            if df != 0.0 && newton > a && newton < b && (2.0 * f).abs() <= (step_old * df).abs() {
+                step_old = step;
+                newton
+            } else {
+                step_old = step;
+                0.5 * (a + b)
+            };
+        step = next - x;
+        if step.abs() <= 1e-15 * x.abs().max(1e-300) || b - a <= 1e-15 * a.abs().max(b.abs()) {
             return next;
         }
         x = next;
@@ -237,7 +254,10 @@ mod tests {
             let mut sorted = r.to_vec();
             sorted.sort_by(f64::total_cmp);
             for (got, want) in out[..n].iter().zip(&sorted) {
-                assert!((got - want).abs() < 1e-9 * want.abs().max(1.0), "{got} vs {want}");
+                assert!(
+                    (got - want).abs() < 1e-9 * want.abs().max(1.0),
+                    "{got} vs {want}"
+                );
             }
         }
     }
@@ -259,6 +279,33 @@ mod tests {
         let n = real_roots(&c, &mut out);
         assert_eq!(n, 2);
         assert!((out[0] + 0.5).abs() < 1e-12 && (out[1] - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn far_bracket_converges_to_the_root() {
+        // A degree-10 polynomial whose root 2.986 sits in a wide isolating interval: plain
+        // Newton from the far end crawled and stopped at 922 before the rtsafe fallback.
+        let c = [
+            425.15352889230576,
+            658.8647576002148,
+            501.4546422350122,
+            165.03983660181433,
+            -8.737505784117275,
+            -20.658643927871772,
+            -5.526756405254943,
+            -0.6775556426820017,
+            -0.044444573885050076,
+            -0.0010626015839927394,
+            -9.368976332859227e-6,
+        ];
+        let mut out = [0.0; MAX_DEGREE];
+        let n = real_roots(&c, &mut out);
+        let want = [-3.85000257, -3.12661275, -2.8866058, 2.98644909];
+        assert_eq!(n, 4, "{:?}", &out[..n]);
+        for (got, w) in out[..n].iter().zip(want) {
+            assert!((got - w).abs() < 1e-7, "{got} vs {w}");
+            assert!(eval(&c, *got).abs() < 1e-9);
+        }
     }
 
     #[test]

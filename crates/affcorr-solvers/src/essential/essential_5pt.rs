@@ -1,0 +1,268 @@
+//! Five-point relative pose: the essential matrices consistent with five calibrated point
+//! correspondences.
+//!
+//! D. Nistér, "An efficient solution to the five-point relative pose problem", IEEE TPAMI 26(6),
+//! 2004; H. Stewénius, C. Engels, D. Nistér, "Recent developments on direct relative
+//! orientation", ISPRS J. 60, 2006.
+//!
+//! 1. Each correspondence gives one row of p̂2ᵀ E p̂1 = 0 (Nistér eq. 3); the 5×9 system has a
+//!    4-dimensional null space E = x·X + y·Y + z·Z + W (eq. 9), taken orthonormal from a
+//!    Householder QR of its transpose.
+//! 2. det E = 0 and 2·E Eᵀ E − tr(E Eᵀ)·E = 0 (eqs. 6–7) give ten cubics in (x, y, z): a 10×20
+//!    matrix over the monomials x³, y³, x²y, xy², x²z, x², y²z, y², xyz, xy | xz², xz, x, yz²,
+//!    yz, y, z³, z², z, 1.
+//! 3. Gauss–Jordan elimination (partial pivoting) of its left 10×10 block (§3.2.2). With rows
+//!    ⟨e⟩…⟨j⟩ led by x²z, x², y²z, y², xyz, xy, the combinations ⟨k⟩ = ⟨e⟩ − z⟨f⟩,
+//!    ⟨l⟩ = ⟨g⟩ − z⟨h⟩, ⟨m⟩ = ⟨i⟩ − z⟨j⟩ are linear in (x, y, 1) with coefficients of degree
+//!    3, 3, 4 in z: B(z)·(x, y, 1)ᵀ = 0 (eq. 11–13).
+//! 4. det B(z) is the degree-10 polynomial of eq. 14; its real roots come from the shared Sturm
+//!    root finder ([`crate::poly::real_roots`]), no eigen-decomposition.
+//! 5. For each root, (x, y, 1) spans the null space of B(z): the cross product of the two rows
+//!    of B(z) whose cross product is largest (eq. 15).
+//! 6. Robustness beyond the paper: critical points of det B(z) where it nearly vanishes are
+//!    added as roots (a near-double root can become a complex pair under rounding), and each
+//!    (x, y, z) is polished by Gauss–Newton on the ten cubics. On planar scenes this lifts the
+//!    1e-8 success rate from 81% to 99.7% (tests/essential_solvers.rs).
+//!
+//! No heap allocation: every array lives on the stack.
+
+use super::constraints::{CUBIC, combine, cubic_constraints, null_space, point_row, unit};
+use crate::poly;
+use affcorr_geom::{Mat3, Vec2};
+
+/// Largest number of essential matrices [`essential_5pt`] writes.
+pub const ESSENTIAL_5PT_MAX_SOLUTIONS: usize = 10;
+
+/// The essential matrices E (unit Frobenius norm, up to sign) with x̂2ᵢᵀ E x̂1ᵢ = 0 for five
+/// correspondences in normalised coordinates (x̂ = K⁻¹p).
+///
+/// Writes up to [`ESSENTIAL_5PT_MAX_SOLUTIONS`] models into `out` (which must be at least that
+/// long) and returns how many. Degenerate samples (fewer than five points, repeated points, a
+/// rank-deficient system, NaN or infinity) give 0 models.
+///
+/// ```
+/// use affcorr_geom::{Vec2, Vec3, Mat3, epipolar::essential_from_pose, synthetic::rotation_about};
+/// use affcorr_solvers::essential::{essential_5pt, ESSENTIAL_5PT_MAX_SOLUTIONS};
+/// let r = rotation_about(&Vec3::new(0.2, 1.0, 0.1).normalize(), 0.3);
+/// let t = Vec3::new(1.0, 0.1, 0.2);
+/// let pts = [[0.1, 0.2, 4.0], [-0.5, 0.3, 5.0], [0.7, -0.4, 6.0], [0.2, 0.6, 3.5], [-0.3, -0.8, 4.5]];
+/// let (mut x1, mut x2) = (vec![], vec![]);
+/// for p in pts {
+///     let p1 = Vec3::from(p);
+///     let p2 = r * p1 + t;
+///     x1.push(Vec2::new(p1.x / p1.z, p1.y / p1.z));
+///     x2.push(Vec2::new(p2.x / p2.z, p2.y / p2.z));
+/// }
+/// let mut out = [Mat3::zeros(); ESSENTIAL_5PT_MAX_SOLUTIONS];
+/// let n = essential_5pt(&x1, &x2, &mut out);
+/// let truth = essential_from_pose(&r, &t).normalize();
+/// assert!(out[..n].iter().any(|e| (e - truth).norm().min((e + truth).norm()) < 1e-9));
+/// ```
+pub fn essential_5pt(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
+    if x1.len() != 5 || x2.len() != 5 || out.len() < ESSENTIAL_5PT_MAX_SOLUTIONS {
+        return 0;
+    }
+    let mut rows = [[0.0; 9]; 5];
+    for i in 0..5 {
+        rows[i] = point_row(&x1[i], &x2[i]);
+    }
+    let mut basis = [[0.0; 9]; 4];
+    if !null_space(&rows, &mut basis) {
+        return 0;
+    }
+    solve_from_basis(&basis, out)
+}
+
+/// Steps 2–5 for a 4-dimensional family `basis = [X, Y, Z, W]`.
+pub(crate) fn solve_from_basis(basis: &[[f64; 9]; 4], out: &mut [Mat3]) -> usize {
+    let orig = cubic_constraints(basis);
+    let mut a = orig;
+    if !gauss_jordan(&mut a) {
+        return 0;
+    }
+    // Coefficients of ⟨k⟩, ⟨l⟩, ⟨m⟩ (ascending in z) for x, y and 1 (eq. 12).
+    let mut b = [[[0.0; 5]; 3]; 3];
+    for (r, row) in b.iter_mut().enumerate() {
+        let (e, f) = (&a[4 + 2 * r], &a[5 + 2 * r]);
+        for (v, c) in [(0usize, 10usize), (1, 13)] {
+            // Columns c, c+1, c+2 hold the coefficients of (x|y)·z², (x|y)·z, (x|y).
+            row[v] = [e[c + 2], e[c + 1] - f[c + 2], e[c] - f[c + 1], -f[c], 0.0];
+        }
+        // Columns 16..19: z³, z², z, 1.
+        row[2] = [e[19], e[18] - f[19], e[17] - f[18], e[16] - f[17], -f[16]];
+    }
+    debug_assert_eq!(CUBIC[10], [1, 0, 2]);
+    // det B(z) (eq. 14), by cofactors along the first row.
+    let cof = |p: &[f64; 5], q: &[f64; 5], r: &[f64; 5], s: &[f64; 5]| {
+        let mut c = [0.0; 9];
+        for i in 0..5 {
+            for j in 0..5 {
+                if i + j < 9 {
+                    c[i + j] += p[i] * q[j] - r[i] * s[j];
+                }
+            }
+        }
+        c
+    };
+    let c0 = cof(&b[1][1], &b[2][2], &b[1][2], &b[2][1]);
+    let c1 = cof(&b[1][0], &b[2][2], &b[1][2], &b[2][0]);
+    let c2 = cof(&b[1][0], &b[2][1], &b[1][1], &b[2][0]);
+    let mut det = [0.0; 11];
+    for i in 0..5 {
+        for j in 0..9 {
+            if i + j < 11 {
+                det[i + j] += b[0][0][i] * c0[j] - b[0][1][i] * c1[j] + b[0][2][i] * c2[j];
+            }
+        }
+    }
+    let mut roots = [0.0; 2 * poly::MAX_DEGREE];
+    let mut nroots = poly::real_roots(&det, &mut roots[..poly::MAX_DEGREE]);
+    // A (near-)double root, e.g. the two-fold ambiguity of a planar scene, can turn into a
+    // complex pair under rounding and be missed: add the critical points of det B where it
+    // nearly vanishes; Gauss–Newton below settles them.
+    let mut ddet = [0.0; 10];
+    for i in 1..11 {
+        ddet[i - 1] = i as f64 * det[i];
+    }
+    let mut crit = [0.0; poly::MAX_DEGREE];
+    let ncrit = poly::real_roots(&ddet, &mut crit);
+    for &zc in &crit[..ncrit] {
+        let mag: f64 = det
+            .iter()
+            .rev()
+            .fold(0.0, |acc, c| acc * zc.abs() + c.abs());
+        if poly::eval(&det, zc).abs() <= 1e-6 * mag
+            && roots[..nroots]
+                .iter()
+                .all(|r| (r - zc).abs() > 1e-9 * (1.0 + zc.abs()))
+            && nroots < ESSENTIAL_5PT_MAX_SOLUTIONS
+        {
+            roots[nroots] = zc;
+            nroots += 1;
+        }
+    }
+    let mut n = 0;
+    for &z in &roots[..nroots] {
+        let mut m = [[0.0; 3]; 3];
+        for r in 0..3 {
+            for c in 0..3 {
+                m[r][c] = poly::eval(&b[r][c], z);
+            }
+        }
+        // Null vector of B(z): the largest of the three row cross products.
+        let cross = |p: &[f64; 3], q: &[f64; 3]| {
+            [
+                p[1] * q[2] - p[2] * q[1],
+                p[2] * q[0] - p[0] * q[2],
+                p[0] * q[1] - p[1] * q[0],
+            ]
+        };
+        let mut best = [0.0; 3];
+        let mut best_norm = -1.0;
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            let v = cross(&m[p], &m[q]);
+            let norm = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+            if norm > best_norm {
+                best = v;
+                best_norm = norm;
+            }
+        }
+        if best[2] == 0.0 || !best_norm.is_finite() {
+            continue;
+        }
+        let (x, y) = (best[0] / best[2], best[1] / best[2]);
+        let (x, y, z) = polish(&orig, x, y, z);
+        if let Some(e) = unit(combine(basis, &[x, y, z, 1.0])) {
+            out[n] = e;
+            n += 1;
+        }
+    }
+    n
+}
+
+/// Gauss–Jordan elimination of the left 10×10 block with partial pivoting, leaving it the
+/// identity. Returns `false` when a pivot vanishes (a degenerate configuration).
+fn gauss_jordan(a: &mut [[f64; 20]; 10]) -> bool {
+    let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    if !(scale.is_finite() && scale > 0.0) {
+        return false;
+    }
+    for col in 0..10 {
+        let mut p = col;
+        for r in col + 1..10 {
+            if a[r][col].abs() > a[p][col].abs() {
+                p = r;
+            }
+        }
+        if !(a[p][col].abs() > 1e-13 * scale) {
+            return false;
+        }
+        a.swap(col, p);
+        let inv = 1.0 / a[col][col];
+        let pivot_row = {
+            let row = &mut a[col];
+            for v in row[col..].iter_mut() {
+                *v *= inv;
+            }
+            *row
+        };
+        for (r, row) in a.iter_mut().enumerate() {
+            if r == col {
+                continue;
+            }
+            let f = row[col];
+            if f != 0.0 {
+                for c in col..20 {
+                    row[c] -= f * pivot_row[c];
+                }
+            }
+        }
+    }
+    true
+}
+
+/// Gauss–Newton on the ten cubic constraints A·m(x, y, z) = 0 (at most six steps, stopping
+/// when the step is at rounding level): restores full precision where the univariate root or
+/// B(z) is ill-conditioned (near-planar scenes, clustered roots).
+fn polish(a: &[[f64; 20]; 10], mut x: f64, mut y: f64, mut z: f64) -> (f64, f64, f64) {
+    for _ in 0..6 {
+        let mut v = [0.0; 20];
+        let mut d = [[0.0; 20]; 3];
+        let pw = |b: f64, e: u8| -> f64 { (0..e).fold(1.0, |acc, _| acc * b) };
+        for (m, e) in CUBIC.iter().enumerate() {
+            v[m] = pw(x, e[0]) * pw(y, e[1]) * pw(z, e[2]);
+            for k in 0..3 {
+                if e[k] > 0 {
+                    let mut ee = *e;
+                    ee[k] -= 1;
+                    d[k][m] = e[k] as f64 * pw(x, ee[0]) * pw(y, ee[1]) * pw(z, ee[2]);
+                }
+            }
+        }
+        let mut jtj = nalgebra::Matrix3::<f64>::zeros();
+        let mut jtr = nalgebra::Vector3::<f64>::zeros();
+        for row in a {
+            let r: f64 = row.iter().zip(&v).map(|(c, m)| c * m).sum();
+            let j = nalgebra::Vector3::new(
+                row.iter().zip(&d[0]).map(|(c, m)| c * m).sum(),
+                row.iter().zip(&d[1]).map(|(c, m)| c * m).sum(),
+                row.iter().zip(&d[2]).map(|(c, m)| c * m).sum(),
+            );
+            jtj += j * j.transpose();
+            jtr += j * r;
+        }
+        match jtj.cholesky() {
+            Some(c) => {
+                let s = c.solve(&jtr);
+                x -= s.x;
+                y -= s.y;
+                z -= s.z;
+                if s.norm() <= 1e-15 * (1.0 + x.abs() + y.abs() + z.abs()) {
+                    break;
+                }
+            }
+            None => break,
+        }
+    }
+    (x, y, z)
+}
