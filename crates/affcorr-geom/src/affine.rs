@@ -116,14 +116,16 @@ pub fn decompose(a: &Mat2, index: usize) -> Result<AffineShape> {
     let scale = det.sqrt();
     let m = a / scale;
     let orientation = (-m[(0, 1)]).atan2(m[(1, 1)]);
-    let a_prime = rotation(-orientation) * m;
     let inv_a = (m[(0, 1)] * m[(0, 1)] + m[(1, 1)] * m[(1, 1)]).sqrt();
     // a = 1/‖m_{:,2}‖ exactly; A′'s (0,0) entry recomputed from M would carry rounding.
     let diag0 = 1.0 / inv_a;
+    // A′ = R(−θ) M with (−sin θ, cos θ) = m_{:,2} / ‖m_{:,2}‖, so its (1,0) entry is
+    // −sin θ·m₁₁ + cos θ·m₂₁ = (m₁₂ m₁₁ + m₂₂ m₂₁) / ‖m_{:,2}‖: no sin/cos of θ needed.
+    let b = (m[(0, 1)] * m[(0, 0)] + m[(1, 1)] * m[(1, 0)]) * diag0;
     Ok(AffineShape {
         orientation,
         scale,
-        residual_shape: [diag0 - 1.0, a_prime[(1, 0)], inv_a - 1.0],
+        residual_shape: [diag0 - 1.0, b, inv_a - 1.0],
     })
 }
 
