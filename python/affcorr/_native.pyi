@@ -182,3 +182,32 @@ def estimate_relative_pose_batch(
     ]
 ]:
     """estimate_relative_pose over many pairs in parallel; K1, K2: one (3, 3) or one per pair."""
+
+# --- essential solvers
+
+def essential_5pt(x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
+    """Essential matrices from five point correspondences (Nistér 2004 / Stewénius 2006).
+
+    x1, x2 (5, 2) in normalised coordinates (x = K^-1 p; use ``normalize_correspondences``).
+    Returns up to 10 matrices (3, 3) with unit Frobenius norm (sign arbitrary) and
+    x2^T E x1 = 0; an empty list for a degenerate sample (e.g. repeated points)."""
+
+def essential_2ac(corrs: ArrayLike) -> list[NDArray[np.float64]]:
+    """Essential matrices from two affine correspondences (Barath & Hajder 2018).
+
+    corrs (2, 8) normalised ACs [x1, y1, x2, y2, a11, a12, a21, a22] (``normalize_correspondences``).
+    Returns up to 10 unit-norm (3, 3) matrices, best first (ranked by the AC equation the
+    minimal sub-problem drops); ACs of two planes give the true E first, ACs of one plane leave
+    several solutions (the homography's two-fold ambiguity among them). Empty for det A <= 0 or
+    a degenerate sample."""
+
+def essential_8pt(x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
+    """The least-squares essential matrix of N >= 8 normalised point correspondences (N, 2)
+    (Hartley-normalised eight-point algorithm), projected to the essential manifold
+    (singular values 1/sqrt2, 1/sqrt2, 0). One matrix, or none for coplanar/repeated points."""
+
+def essential_lsq(
+    x1: ArrayLike, x2: ArrayLike, corrs: ArrayLike | None = None
+) -> list[NDArray[np.float64]]:
+    """Like essential_8pt with the three equations of each normalised AC in corrs (M, 8) stacked
+    under the point rows; needs N + 3M >= 8. x1, x2 may have zero rows."""
