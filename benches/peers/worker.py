@@ -1,0 +1,75 @@
+"""Runs one group of methods (methods.GROUPS) on a scene file, in the venv of that group.
+
+    python worker.py GROUP PROBLEM THRESHOLD scenes.npz out.npz [METHOD ...]
+
+Each method runs once on each scene, after one untimed warm-up call on the first scene. The
+time is the wall-clock time of the call alone (data already in memory, in the library's layout).
+out.npz holds, for method m and scene i: ``m/i/time``, ``m/i/ok``, and the model and ``inliers``
+when ok; errors go to ``m/i/error``.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+import traceback
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import methods  # noqa: E402
+import scenes as scene_io  # noqa: E402
+
+
+def versions() -> str:
+    """Versions of the libraries importable here."""
+    found = []
+    for mod in ("affcorr", "kornia", "torch", "poselib", "cv2", "pycolmap", "pygcransac", "numpy"):
+        try:
+            m = __import__(mod)
+        except Exception:
+            continue
+        found.append(f"{mod} {getattr(m, '__version__', '?')}")
+    return ", ".join(found)
+
+
+def main(argv: list[str]) -> int:
+    group, problem, thr, src, dst, *only = argv
+    thr = float(thr)
+    data = scene_io.load(src)
+    try:
+        factories = methods.GROUPS[group]()
+    except Exception as e:  # an unavailable library: report it for every method of the group
+        np.savez(dst, group_error=f"{type(e).__name__}: {e}")
+        return 0
+    out: dict[str, np.ndarray] = {"versions": np.str_(versions())}
+    for name, make in factories.items():
+        if only and name not in only:
+            continue
+        f = make(problem)
+        try:
+            f(data[0], thr)  # warm-up (imports, lazy initialisation, caches)
+        except Exception:
+            pass
+        for i, s in enumerate(data):
+            key = f"{name}/{i}/"
+            t0 = time.perf_counter()
+            try:
+                r = f(s, thr)
+                out[key + "time"] = np.float64(time.perf_counter() - t0)
+            except Exception:
+                out[key + "time"] = np.float64(time.perf_counter() - t0)
+                out[key + "error"] = np.str_(traceback.format_exc(limit=2)[-500:])
+                r = None
+            out[key + "ok"] = np.bool_(r is not None)
+            for k, v in (r or {}).items():
+                out[key + k] = np.asarray(v)
+        print(f"  {group}/{name}: done", file=sys.stderr, flush=True)
+    np.savez(dst, **out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
