@@ -28,8 +28,8 @@
 //! points at distance ρ by ε·ρ); exact data is unaffected, noisy estimates improve about 3×.
 
 use crate::normalization::{
-    AFFINE_ROW_RADIUS_PX, Lsq9, NullSpace, Similarity, Vec9, gauss_jordan, mat3_from_vec9,
-    null_vector, unit_frobenius,
+    AFFINE_ROW_RADIUS_PX, Lsq9, NullSpace, Similarity, Vec9, cofactor, gauss_jordan,
+    mat3_from_vec9, null_vector, smallest_singular3, unit_frobenius,
 };
 use crate::poly::real_roots;
 use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2};
@@ -101,10 +101,10 @@ pub fn fundamental_8pt(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
     for (a, b) in x1.iter().zip(x2) {
         lsq.add_row(epipolar_row(&t1.apply(a), &t2.apply(b)));
     }
-    let Some(ns) = lsq.solve() else {
+    let Some(ns) = lsq.solve(RANK_TOL) else {
         return 0;
     };
-    if ns.dimension(RANK_TOL) > 1 {
+    if ns.dim > 1 {
         return 0;
     }
     rank2_solution(&ns.v[0], &t1, &t2, out)
@@ -136,7 +136,7 @@ pub fn fundamental_3ac(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize 
     let Some((ns, t1, t2)) = ac_system(acs) else {
         return 0;
     };
-    match ns.dimension(RANK_TOL) {
+    match ns.dim {
         0 | 1 => rank2_solution(&ns.v[0], &t1, &t2, out),
         2 => {
             let f1 = mat3_from_vec9(ns.v[0].as_slice());
@@ -161,7 +161,7 @@ pub fn fundamental_ac_lsq(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usi
     let Some((ns, t1, t2)) = ac_system(acs) else {
         return 0;
     };
-    if ns.dimension(RANK_TOL) > 1 {
+    if ns.dim > 1 {
         return 0;
     }
     rank2_solution(&ns.v[0], &t1, &t2, out)
@@ -223,18 +223,7 @@ fn ac_system(acs: &[AffineCorrespondence]) -> Option<(NullSpace, Similarity, Sim
             lsq.add_row(r.map(|v| v * w));
         }
     }
-    Some((lsq.solve()?, t1, t2))
-}
-
-/// The cofactor matrix: row i is r_{i+1} × r_{i+2}, so Σ cof(A) ⊙ B = tr(adj(A) B).
-#[inline]
-fn cofactor(a: &Mat3) -> Mat3 {
-    let r = |i: usize| a.row(i).transpose();
-    Mat3::from_rows(&[
-        r(1).cross(&r(2)).transpose(),
-        r(2).cross(&r(0)).transpose(),
-        r(0).cross(&r(1)).transpose(),
-    ])
+    Some((lsq.solve(RANK_TOL)?, t1, t2))
 }
 
 /// Writes F = denormalised F₁ + xF₂ for every real root x of det(F₁ + xF₂) = 0 (and F₂ itself when
@@ -269,17 +258,15 @@ fn cubic_solutions(
     n
 }
 
-/// Projects the null vector to rank 2 (SVD, smallest singular value zeroed), denormalises, writes.
+/// Projects the null vector to rank 2 (smallest singular value zeroed), denormalises, writes.
 fn rank2_solution(v: &Vec9, t1: &Similarity, t2: &Similarity, out: &mut [Mat3]) -> usize {
     let f = mat3_from_vec9(v.as_slice());
-    let mut svd = f.svd(true, true);
-    let s = &mut svd.singular_values;
-    let imin = s.imin();
-    s[imin] = 0.0;
-    match svd.recompose() {
-        Ok(f) => write_denormalised(&f, t1, t2, out),
-        Err(_) => 0,
-    }
+    // F − σ₃u₃v₃ᵀ = F(I − v₃v₃ᵀ): the closest rank-2 matrix (Eckart–Young). A rank-1 F is
+    // degenerate.
+    let Some(v3) = smallest_singular3(&f, false, RANK_TOL) else {
+        return 0;
+    };
+    write_denormalised(&(f - (f * v3) * v3.transpose()), t1, t2, out)
 }
 
 /// F = T₂ᵀ F̂ T₁, unit Frobenius norm; 0 if not finite or zero.

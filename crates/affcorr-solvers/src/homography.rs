@@ -30,10 +30,10 @@
 //! estimates improve about 3× against unweighted rows.
 
 use crate::normalization::{
-    AFFINE_ROW_RADIUS_PX, Lsq9, Similarity, mat3_from_vec9, unit_frobenius,
+    AFFINE_ROW_RADIUS_PX, Lsq9, Similarity, householder_fold, mat3_from_vec9, smallest_singular3,
+    unit_frobenius,
 };
 use affcorr_geom::{AffineCorrespondence, Mat3, Vec2, Vec3};
-use nalgebra::{SMatrix, SVector};
 
 /// Most models [`homography_4pt`] returns.
 pub const HOMOGRAPHY_4PT_MAX_SOLUTIONS: usize = 1;
@@ -229,47 +229,34 @@ pub fn homography_1ac_given_f(acs: &[AffineCorrespondence], f: &Mat3, out: &mut 
         c: ac.x2,
     };
     let f_hat = t2.inverse_matrix().transpose() * f * t1.inverse_matrix();
-    let svd = f_hat.svd(true, false);
-    let Some(u) = svd.u else {
+    // e₂: the left null vector of F̂ (its smallest left singular vector); rank(F) ≥ 2.
+    let Some(e2) = smallest_singular3(&f_hat, true, RANK_TOL) else {
         return 0;
     };
-    let s = svd.singular_values;
-    let (mut lo, mut hi) = (0, 0);
-    for k in 1..3 {
-        if s[k] < s[lo] {
-            lo = k;
-        }
-        if s[k] > s[hi] {
-            hi = k;
-        }
-    }
-    let mid = 3 - lo - hi;
-    if lo == hi || !(s[mid] > RANK_TOL * s[hi]) {
-        return 0;
-    }
-    let e2: Vec3 = u.column(lo).into();
     let base = -e2.cross_matrix() * f_hat;
     let (p, q) = (t1.apply(&ac.x1), t2.apply(&ac.x2));
     let a_hat = ac.a * (t2.s / t1.s);
     let [r1, r2] = point_rows(&p, &q);
     let [r3, r4, r5, r6] = affine_rows(&p, &q, &a_hat);
-    let mut m = SMatrix::<f64, 6, 3>::zeros();
-    let mut rhs = SVector::<f64, 6>::zeros();
-    for (i, r) in [r1, r2, r3, r4, r5, r6].iter().enumerate() {
+    // Least squares M v = b by Householder QR of [M | b] (6×4): R₃ v = (Qᵀb)₁:₃.
+    let mut rows = [[0.0; 9]; 6];
+    for (row, r) in rows.iter_mut().zip([r1, r2, r3, r4, r5, r6]) {
         for k in 0..3 {
-            m[(i, k)] = (0..3).map(|j| r[3 * j + k] * e2[j]).sum();
+            row[k] = (0..3).map(|j| r[3 * j + k] * e2[j]).sum();
         }
-        rhs[i] = -(0..9).map(|j| r[j] * base[(j / 3, j % 3)]).sum::<f64>();
+        row[3] = -(0..9).map(|j| r[j] * base[(j / 3, j % 3)]).sum::<f64>();
     }
-    let svd = m.svd(true, true);
-    let sv = svd.singular_values;
-    let (smin, smax) = (sv.min(), sv.max());
-    if !(smin > RANK_TOL * smax) {
+    let mut qr = [[0.0; 9]; 9];
+    householder_fold(&mut qr, 4, &mut rows, 6);
+    let d = [qr[0][0].abs(), qr[1][1].abs(), qr[2][2].abs()];
+    if !(d[0].min(d[1]).min(d[2]) > RANK_TOL * d[0].max(d[1]).max(d[2])) {
         return 0;
     }
-    let Ok(v) = svd.solve(&rhs, 0.0) else {
-        return 0;
-    };
+    let mut v = Vec3::zeros();
+    for i in (0..3).rev() {
+        let s: f64 = (i + 1..3).map(|j| qr[i][j] * v[j]).sum();
+        v[i] = (qr[i][3] - s) / qr[i][i];
+    }
     let h_norm = base + e2 * v.transpose();
     finish(&h_norm, &t1, &t2, out)
 }
@@ -338,10 +325,10 @@ fn ac_least_squares(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize {
 
 /// The least-squares null vector as H, if the null space is one-dimensional.
 fn solve_lsq(lsq: &Lsq9, t1: &Similarity, t2: &Similarity, out: &mut [Mat3]) -> usize {
-    let Some(ns) = lsq.solve() else {
+    let Some(ns) = lsq.solve(RANK_TOL) else {
         return 0;
     };
-    if ns.dimension(RANK_TOL) > 1 {
+    if ns.dim > 1 {
         return 0;
     }
     finish(&mat3_from_vec9(ns.v[0].as_slice()), t1, t2, out)
