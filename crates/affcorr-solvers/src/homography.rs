@@ -239,15 +239,15 @@ pub fn homography_1ac_given_f(acs: &[AffineCorrespondence], f: &Mat3, out: &mut 
     let [r1, r2] = point_rows(&p, &q);
     let [r3, r4, r5, r6] = affine_rows(&p, &q, &a_hat);
     // Least squares M v = b by Householder QR of [M | b] (6×4): R₃ v = (Qᵀb)₁:₃.
-    let mut rows = [[0.0; 9]; 6];
-    for (row, r) in rows.iter_mut().zip([r1, r2, r3, r4, r5, r6]) {
+    let mut cols = [[0.0; 6]; 9];
+    for (i, r) in [r1, r2, r3, r4, r5, r6].iter().enumerate() {
         for k in 0..3 {
-            row[k] = (0..3).map(|j| r[3 * j + k] * e2[j]).sum();
+            cols[k][i] = (0..3).map(|j| r[3 * j + k] * e2[j]).sum();
         }
-        row[3] = -(0..9).map(|j| r[j] * base[(j / 3, j % 3)]).sum::<f64>();
+        cols[3][i] = -(0..9).map(|j| r[j] * base[(j / 3, j % 3)]).sum::<f64>();
     }
     let mut qr = [[0.0; 9]; 9];
-    householder_fold(&mut qr, 4, &mut rows, 6);
+    householder_fold(&mut qr, 4, &mut cols, 6);
     let d = [qr[0][0].abs(), qr[1][1].abs(), qr[2][2].abs()];
     if !(d[0].min(d[1]).min(d[2]) > RANK_TOL * d[0].max(d[1]).max(d[2])) {
         return 0;

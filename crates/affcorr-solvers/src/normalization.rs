@@ -176,7 +176,8 @@ pub(crate) fn null_vector<const R: usize, const C: usize>(
 #[derive(Debug, Clone)]
 pub(crate) struct Lsq9 {
     r: [[f64; 9]; 9],
-    block: [[f64; 9]; BLOCK],
+    /// Buffered rows, column-major: `block[j][row]`.
+    block: [[f64; BLOCK]; 9],
     len: usize,
 }
 
@@ -209,7 +210,7 @@ impl Lsq9 {
     pub fn new() -> Self {
         Self {
             r: [[0.0; 9]; 9],
-            block: [[0.0; 9]; BLOCK],
+            block: [[0.0; BLOCK]; 9],
             len: 0,
         }
     }
@@ -217,7 +218,9 @@ impl Lsq9 {
     /// Appends the equation `row · f = 0`.
     #[inline]
     pub fn add_row(&mut self, row: [f64; 9]) {
-        self.block[self.len] = row;
+        for (col, v) in self.block.iter_mut().zip(row) {
+            col[self.len] = v;
+        }
         self.len += 1;
         if self.len == BLOCK {
             householder_fold(&mut self.r, 9, &mut self.block, BLOCK);
@@ -261,18 +264,20 @@ impl Lsq9 {
     }
 }
 
-/// Folds the first `k` rows of `block` (their first `m` entries) into the m×m upper-triangular
-/// `r`: Householder QR of [R; B], exploiting R's zeros below the diagonal. `block` is clobbered.
+/// Folds the first `k` rows of `block` (stored column-major, `block[j][row]`, first `m` columns)
+/// into the m×m upper-triangular `r`: Householder QR of [R; B], exploiting R's zeros below the
+/// diagonal. `block` is clobbered. Column-major storage keeps the inner loops contiguous.
 #[inline]
 pub(crate) fn householder_fold<const K: usize>(
     r: &mut [[f64; 9]; 9],
     m: usize,
-    block: &mut [[f64; 9]; K],
+    block: &mut [[f64; K]; 9],
     k: usize,
 ) {
-    let block = &mut block[..k];
     for i in 0..m {
-        let tail: f64 = block.iter().map(|b| b[i] * b[i]).sum();
+        let (head, rest) = block.split_at_mut(i + 1);
+        let bi = &head[i][..k];
+        let tail: f64 = bi.iter().map(|v| v * v).sum();
         if tail == 0.0 {
             continue;
         }
@@ -282,18 +287,18 @@ pub(crate) fn householder_fold<const K: usize>(
         let alpha = if x0 >= 0.0 { -norm } else { norm };
         let v0 = x0 - alpha;
         let tau = 2.0 / (v0 * v0 + tail);
-        for j in i + 1..m {
-            let dot = v0 * r[i][j] + block.iter().map(|b| b[i] * b[j]).sum::<f64>();
+        for (jj, bj) in rest[..m - i - 1].iter_mut().enumerate() {
+            let j = i + 1 + jj;
+            let bj = &mut bj[..k];
+            let dot = v0 * r[i][j] + bi.iter().zip(bj.iter()).map(|(a, b)| a * b).sum::<f64>();
             let f = tau * dot;
             r[i][j] -= f * v0;
-            for b in block.iter_mut() {
-                b[j] -= f * b[i];
+            for (b, a) in bj.iter_mut().zip(bi) {
+                *b -= f * a;
             }
         }
         r[i][i] = alpha;
-        for b in block.iter_mut() {
-            b[i] = 0.0;
-        }
+        head[i][..k].iter_mut().for_each(|v| *v = 0.0);
     }
 }
 
@@ -400,17 +405,17 @@ fn deflate(r: &[[f64; 9]; 9], n: usize, x: &[f64; 9]) -> ([[f64; 9]; 9], [f64; 9
     let alpha = if x[n - 1] >= 0.0 { -1.0 } else { 1.0 };
     u[n - 1] -= alpha;
     let uu: f64 = u[..n].iter().map(|v| v * v).sum();
-    let mut rows = [[0.0; 9]; 9];
+    let mut cols = [[0.0; 9]; 9];
     for i in 0..n {
-        // Row i of R P = rᵢ − (2 rᵢ·u / uᵀu) uᵀ; keep its first n−1 entries.
+        // Row i of R P = rᵢ − (2 rᵢ·u / uᵀu) uᵀ; keep its first n−1 entries (column-major).
         let ru: f64 = (i..n).map(|j| r[i][j] * u[j]).sum();
         let f = 2.0 * ru / uu;
         for j in 0..n - 1 {
-            rows[i][j] = if j >= i { r[i][j] } else { 0.0 } - f * u[j];
+            cols[j][i] = if j >= i { r[i][j] } else { 0.0 } - f * u[j];
         }
     }
     let mut out = [[0.0; 9]; 9];
-    householder_fold(&mut out, n - 1, &mut rows, n);
+    householder_fold(&mut out, n - 1, &mut cols, n);
     (out, u)
 }
 
