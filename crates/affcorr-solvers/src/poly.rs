@@ -150,8 +150,19 @@ fn sturm_roots(p: &[f64], roots: &mut [f64]) -> usize {
     let d = p.len() - 1;
     let sturm = Sturm::new(p);
     let monic = &sturm.seq[0][..=d];
-    // Cauchy's bound: every root has |x| < 1 + max |c_i / c_d|.
-    let bound = 1.0 + monic[..d].iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    // Fujiwara's bound: every root has |x| ≤ 2·max(|c_{d−k}/c_d|^{1/k}, |c_0/(2c_d)|^{1/d}),
+    // far tighter than Cauchy's 1 + max |c_i/c_d| when the leading coefficient is small, which
+    // saves bisection levels. Slightly enlarged so a root on the bound stays inside (lo, hi].
+    let mut fujiwara = 0.0f64;
+    for k in 1..=d {
+        let c = if k == d {
+            0.5 * monic[0].abs()
+        } else {
+            monic[d - k].abs()
+        };
+        fujiwara = fujiwara.max(c.powf(1.0 / k as f64));
+    }
+    let bound = 2.0 * fujiwara * (1.0 + 1e-10) + f64::MIN_POSITIVE;
     let (lo, hi) = (-bound, bound);
     let mut stack = [(0.0, 0.0, 0u32, 0u32, 0u32); 4 * LEN];
     stack[0] = (lo, hi, sturm.sign_changes(lo), sturm.sign_changes(hi), 0);
@@ -187,6 +198,10 @@ fn sturm_roots(p: &[f64], roots: &mut [f64]) -> usize {
 /// only gains a factor (1 − 1/d) per step and can stop short of the root.
 fn refine(p: &[f64], mut a: f64, mut b: f64) -> f64 {
     let fa = eval(p, a);
+    if (fa > 0.0) == (eval(p, b) > 0.0) {
+        // No sign change: a root of even multiplicity; plain Newton inside the bracket.
+        return newton_even(p, a, b);
+    }
     let mut x = 0.5 * (a + b);
     let mut step_old = b - a;
     let mut step = step_old;
@@ -213,6 +228,23 @@ fn refine(p: &[f64], mut a: f64, mut b: f64) -> f64 {
         step = next - x;
         if step.abs() <= 1e-15 * x.abs().max(1e-300) || b - a <= 1e-15 * a.abs().max(b.abs()) {
             return next;
+        }
+        x = next;
+    }
+    x
+}
+
+/// Newton steps for a root of even multiplicity in (a, b) (no sign change to bracket on).
+fn newton_even(p: &[f64], a: f64, b: f64) -> f64 {
+    let mut x = 0.5 * (a + b);
+    for _ in 0..100 {
+        let (f, df) = eval_with_derivative(p, x);
+        if f == 0.0 || df == 0.0 {
+            return x;
+        }
+        let next = x - f / df;
+        if !(next > a && next < b) || (next - x).abs() <= 1e-15 * x.abs().max(1e-300) {
+            return x;
         }
         x = next;
     }
