@@ -98,7 +98,10 @@ def kornia_methods():
     torch.set_num_threads(1)
 
     def make(problem):
-        model_type = "homography" if problem == "homography" else "fundamental"
+        # 7-point F: kornia 0.7.4's default 8-point "fundamental" RANSAC finds <= 16% of the
+        # inliers at 50% outliers here (even with 5x the iterations), although an 8-point fit on
+        # 8 true inliers is fine; its 7-point variant works.
+        model_type = "homography" if problem == "homography" else "fundamental_7pt"
 
         def f(s, thr):
             torch.manual_seed(0)
@@ -251,7 +254,10 @@ def gcransac_methods():
             def f(s, thr):
                 c = np.ascontiguousarray(s["corrs"][:, :columns])
                 probs = np.zeros(0)
+                # SPRT off: with it, GC-RANSAC's findHomography failed in 8 of 10 runs here
+                # (issue #4), and in this benchmark at 75% outliers.
                 kw = dict(threshold=thr, conf=CONF, max_iters=MAX_ITERS, sampler=0, solver=solver)
+                kw["use_sprt"] = False
                 if problem == "homography":
                     M, mask = pygcransac.findHomography(c, 480, 640, 480, 640, probs, **kw)
                 elif problem == "fundamental":
