@@ -73,18 +73,20 @@ fn score_model<P: Problem, S: Scoring>(
     Some((score, inliers))
 }
 
-/// Indices of the data with squared residual below the inlier threshold, and their weights.
+/// Indices of the data with squared residual below `scale²` × the inlier threshold, and their
+/// weights (the scoring's weight at the true threshold, 1 beyond it).
 fn collect_inliers<P: Problem, S: Scoring>(
     problem: &P,
     scoring: &S,
     model: &P::Model,
+    scale: f64,
     buf: &mut [f64],
     indices: &mut Vec<usize>,
     weights: &mut Vec<f64>,
 ) {
     indices.clear();
     weights.clear();
-    let thr = scoring.inlier_threshold_sq();
+    let thr = scoring.inlier_threshold_sq() * scale * scale;
     let n = problem.len();
     let mut start = 0;
     while start < n {
@@ -93,7 +95,7 @@ fn collect_inliers<P: Problem, S: Scoring>(
         for (k, &r2) in buf[..len].iter().enumerate() {
             if r2 < thr {
                 indices.push(start + k);
-                weights.push(scoring.weight(r2));
+                weights.push(if scale > 1.0 { 1.0 } else { scoring.weight(r2) });
             }
         }
         start += len;
@@ -224,13 +226,18 @@ where
             problem,
             scoring,
             &best.model,
+            1.0,
             &mut buf,
             &mut lo_indices,
             &mut lo_weights,
         );
         if lo_indices.len() >= m
-            && let Some(refined) =
-                problem.refine(&best.model, &lo_indices, scoring.inlier_threshold_sq())
+            && let Some(refined) = problem.refine(
+                &best.model,
+                &lo_indices,
+                scoring.inlier_threshold_sq(),
+                FINAL_LM_ITERATIONS,
+            )
             && let Some((score, inliers)) =
                 score_model(problem, scoring, &refined, best.score, &mut buf)
             && score > best.score
@@ -255,7 +262,23 @@ where
     })
 }
 
-/// Iterated (re-weighted) least squares on the inliers, kept while the score improves.
+/// Threshold multipliers of the local optimisation's least-squares steps: from a wide basin to
+/// the true threshold (LO-RANSAC's iterative scheme, Lebeda et al., BMVC 2012). The wide first
+/// steps pull in true inliers that a noisy minimal model (e.g. from 2 ACs) misses.
+const LO_SCHEDULE: [f64; 5] = [8.0, 4.0, 2.0, 1.4, 1.0];
+
+/// Levenberg–Marquardt steps per refinement inside local optimisation: enough to leave a rough
+/// minimal model's basin (near-planar scenes make the cost a narrow valley), cheap enough to run
+/// at every schedule step.
+const LO_LM_ITERATIONS: usize = 20;
+/// Levenberg–Marquardt steps of the final refinement.
+const FINAL_LM_ITERATIONS: usize = 100;
+
+/// Iterated least squares on the inliers at shrinking thresholds, then at the true threshold
+/// while the score improves. Each step starts from the best model so far, collects its inliers
+/// at the step's threshold, and tries two candidates: the linear fit on them and the nonlinear
+/// refinement of the best model on them (robust to the outliers a wide threshold lets in).
+/// Every candidate is scored at the true threshold.
 fn local_optimization<P: Problem, S: Scoring>(
     problem: &P,
     scoring: &S,
@@ -265,23 +288,31 @@ fn local_optimization<P: Problem, S: Scoring>(
     indices: &mut Vec<usize>,
     weights: &mut Vec<f64>,
 ) -> Scored<P::Model> {
-    for _ in 0..options.lo_iterations {
-        collect_inliers(problem, scoring, &best.model, buf, indices, weights);
+    for step in 0..options.lo_iterations {
+        let scale = LO_SCHEDULE.get(step).copied().unwrap_or(1.0);
+        collect_inliers(problem, scoring, &best.model, scale, buf, indices, weights);
         if indices.len() <= problem.sample_size() {
             break;
         }
-        let Some(model) = problem.fit_nonminimal(indices, Some(weights)) else {
-            break;
-        };
-        match score_model(problem, scoring, &model, best.score, buf) {
-            Some((score, inliers)) if score > best.score => {
+        let threshold_sq = scoring.inlier_threshold_sq() * scale * scale;
+        let refined = problem.refine(&best.model, indices, threshold_sq, LO_LM_ITERATIONS);
+        let linear = problem.fit_nonminimal(indices, Some(weights));
+        let mut improved = false;
+        for model in refined.into_iter().chain(linear) {
+            if let Some((score, inliers)) = score_model(problem, scoring, &model, best.score, buf)
+                && score > best.score
+            {
                 best = Scored {
                     model,
                     score,
                     inliers,
-                }
+                };
+                improved = true;
             }
-            _ => break,
+        }
+        // Past the schedule, stop at the first step that does not improve.
+        if !improved && step + 1 >= LO_SCHEDULE.len() {
+            break;
         }
     }
     best

@@ -2,21 +2,34 @@
 //! use it for.
 //!
 //! Module map (the axes vary independently, as in kornia-rs's `ransac`):
-//! - [`problem`]: the [`Problem`] trait — data, minimal/non-minimal solvers, residuals, refinement.
+//! - [`problem`]: the [`Problem`] trait: data, minimal/non-minimal solvers, residuals, refinement.
 //! - [`sampler`]: uniform and PROSAC sampling.
 //! - [`score`]: MSAC (and MAGSAC++) scoring with an exact bail-out.
-//! - [`engine`]: the loop — adaptive termination, local optimisation, final refinement.
+//! - [`refine`]: Levenberg–Marquardt with robust losses, used by local optimisation and the
+//!   final refinement.
+//! - [`engine`]: the loop: adaptive termination, local optimisation, final refinement.
 //! - [`options`]: [`RansacOptions`] with documented defaults.
-//! - [`error`]: [`RansacError`].
+//! - [`error`]: the typed error, [`RansacError`].
+//! - [`problems`]: homography, fundamental matrix and relative pose, with point or AC samples.
+//! - [`estimators`]: the entry points `estimate_*` and their parallel `_batch` forms.
 
 pub mod engine;
 pub mod error;
+pub mod estimators;
 pub mod options;
 pub mod problem;
+pub mod problems;
+pub mod refine;
 pub mod sampler;
 pub mod score;
 
 pub use engine::{Estimate, estimate};
 pub use error::{RansacError, Result};
+pub use estimators::{
+    EstimatorOptions, SamplerKind, ScoringKind, estimate_fundamental, estimate_fundamental_batch,
+    estimate_homography, estimate_homography_batch, estimate_relative_pose,
+    estimate_relative_pose_batch,
+};
 pub use options::RansacOptions;
 pub use problem::Problem;
+pub use problems::{Correspondences, SampleKind};

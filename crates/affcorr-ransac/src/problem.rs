@@ -32,15 +32,17 @@ pub trait Problem: Sync {
     /// out.len()` under `model`.
     fn residuals(&self, model: &Self::Model, start: usize, out: &mut [f64]);
 
-    /// Polishes `model` on its inliers by minimising a (robust) geometric error; `None` to keep
-    /// the model as it is. The default does nothing.
+    /// Polishes `model` on `inliers` by minimising a robust geometric error whose loss has scale
+    /// √`threshold_sq`, within `max_iterations` Levenberg–Marquardt steps; `None` to keep the
+    /// model as it is. The default does nothing.
     fn refine(
         &self,
         model: &Self::Model,
         inliers: &[usize],
         threshold_sq: f64,
+        max_iterations: usize,
     ) -> Option<Self::Model> {
-        let _ = (model, inliers, threshold_sq);
+        let _ = (model, inliers, threshold_sq, max_iterations);
         None
     }
 }

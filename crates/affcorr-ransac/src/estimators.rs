@@ -1,0 +1,173 @@
+//! The entry points: `estimate_homography`, `estimate_fundamental`, `estimate_relative_pose`,
+//! and their `_batch` forms, which run many image pairs in parallel with rayon.
+//!
+//! They validate the input, pick the sample kind (ACs when the data carry them, unless told
+//! otherwise), build the sampler and scoring from [`EstimatorOptions`], and run
+//! [`crate::engine::estimate`].
+
+use crate::engine::{Estimate, estimate};
+use crate::error::{RansacError, Result};
+use crate::options::RansacOptions;
+use crate::problem::Problem;
+use crate::problems::fundamental::FundamentalProblem;
+use crate::problems::homography::HomographyProblem;
+use crate::problems::relpose::{PoseModel, RelativePoseProblem};
+use crate::problems::{Correspondences, SampleKind, check_affine_weight, check_kind};
+use crate::sampler::{ProsacSampler, UniformSampler};
+use crate::score::Msac;
+use affcorr_geom::Mat3;
+use affcorr_geom::camera::Intrinsics;
+use affcorr_geom::epipolar::pose_from_essential;
+use rayon::prelude::*;
+
+/// How minimal samples are drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum SamplerKind {
+    /// Uniformly at random (default).
+    #[default]
+    Uniform,
+    /// PROSAC, by decreasing [`EstimatorOptions::quality`].
+    Prosac,
+}
+
+/// How models are scored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum ScoringKind {
+    /// MSAC, the truncated quadratic (default).
+    #[default]
+    Msac,
+}
+
+/// Options of every estimator. Defaults are documented at each field.
+#[derive(Debug, Clone, Default)]
+pub struct EstimatorOptions {
+    /// The loop's options (threshold in pixels, confidence, iterations, seed, LO, refinement).
+    pub ransac: RansacOptions,
+    /// Minimal samples as points or ACs; `None` (default): ACs when the data carry them.
+    pub sample: Option<SampleKind>,
+    /// Uniform (default) or PROSAC sampling.
+    pub sampler: SamplerKind,
+    /// Per-correspondence quality for PROSAC (higher is better), e.g. matcher certainty.
+    pub quality: Option<Vec<f64>>,
+    /// Scoring function. Default MSAC.
+    pub scoring: ScoringKind,
+    /// Weight λ of the affine residual in scoring (0, the default: points only). See each
+    /// problem's module for its units.
+    pub affine_weight: f64,
+}
+
+fn sample_kind(data: &Correspondences, opts: &EstimatorOptions) -> Result<SampleKind> {
+    let kind = opts.sample.unwrap_or(if data.has_affine() {
+        SampleKind::Affine
+    } else {
+        SampleKind::Points
+    });
+    check_kind(data, kind)?;
+    check_affine_weight(opts.affine_weight, data)?;
+    Ok(kind)
+}
+
+fn run<P: Problem>(problem: &P, opts: &EstimatorOptions) -> Result<Estimate<P::Model>> {
+    let scoring = match opts.scoring {
+        ScoringKind::Msac => Msac::new(opts.ransac.threshold),
+    };
+    match opts.sampler {
+        SamplerKind::Uniform => estimate(problem, &mut UniformSampler, &scoring, &opts.ransac),
+        SamplerKind::Prosac => {
+            let quality = opts.quality.as_deref().ok_or(RansacError::InvalidOption {
+                name: "quality",
+                value: "None".into(),
+                reason: "PROSAC needs a per-correspondence quality",
+            })?;
+            if quality.len() != problem.len() {
+                return Err(RansacError::InvalidOption {
+                    name: "quality",
+                    value: format!("{} values", quality.len()),
+                    reason: "needs one value per correspondence",
+                });
+            }
+            let mut sampler = ProsacSampler::new(quality, problem.sample_size());
+            estimate(problem, &mut sampler, &scoring, &opts.ransac)
+        }
+    }
+}
+
+/// Robust homography (pixels): p2 ~ H p1, ‖H‖_F = 1.
+pub fn estimate_homography(
+    data: &Correspondences,
+    opts: &EstimatorOptions,
+) -> Result<Estimate<Mat3>> {
+    let kind = sample_kind(data, opts)?;
+    run(
+        &HomographyProblem::new(data, kind, opts.affine_weight),
+        opts,
+    )
+}
+
+/// Robust fundamental matrix (pixels): p2ᵀ F p1 = 0, ‖F‖_F = 1.
+pub fn estimate_fundamental(
+    data: &Correspondences,
+    opts: &EstimatorOptions,
+) -> Result<Estimate<Mat3>> {
+    let kind = sample_kind(data, opts)?;
+    run(
+        &FundamentalProblem::new(data, kind, opts.affine_weight, opts.ransac.threshold),
+        opts,
+    )
+}
+
+/// Robust relative pose X2 = R X1 + t (|t| = 1) from pixel correspondences and intrinsics.
+/// The final pose is the factorisation of the final E with the most inliers in front of both
+/// cameras.
+pub fn estimate_relative_pose(
+    data: &Correspondences,
+    k1: &Intrinsics,
+    k2: &Intrinsics,
+    opts: &EstimatorOptions,
+) -> Result<Estimate<PoseModel>> {
+    let kind = sample_kind(data, opts)?;
+    let problem = RelativePoseProblem::new(data, *k1, *k2, kind, opts.affine_weight);
+    let mut est = run(&problem, opts)?;
+    let idx: Vec<usize> = (0..data.len()).filter(|&i| est.inliers[i]).collect();
+    let (x1, x2): (Vec<_>, Vec<_>) = idx
+        .iter()
+        .map(|&i| (problem.normalized().x1[i], problem.normalized().x2[i]))
+        .unzip();
+    if let Ok((pose, n)) = pose_from_essential(&est.model.essential, &x1, &x2)
+        && n > 0
+    {
+        est.model = problem.model(pose);
+    }
+    Ok(est)
+}
+
+/// [`estimate_homography`] over many image pairs in parallel.
+pub fn estimate_homography_batch(
+    data: &[Correspondences],
+    opts: &EstimatorOptions,
+) -> Vec<Result<Estimate<Mat3>>> {
+    data.par_iter()
+        .map(|d| estimate_homography(d, opts))
+        .collect()
+}
+
+/// [`estimate_fundamental`] over many image pairs in parallel.
+pub fn estimate_fundamental_batch(
+    data: &[Correspondences],
+    opts: &EstimatorOptions,
+) -> Vec<Result<Estimate<Mat3>>> {
+    data.par_iter()
+        .map(|d| estimate_fundamental(d, opts))
+        .collect()
+}
+
+/// [`estimate_relative_pose`] over many image pairs (each with its intrinsics) in parallel.
+pub fn estimate_relative_pose_batch(
+    pairs: &[(Correspondences, Intrinsics, Intrinsics)],
+    opts: &EstimatorOptions,
+) -> Vec<Result<Estimate<PoseModel>>> {
+    pairs
+        .par_iter()
+        .map(|(d, k1, k2)| estimate_relative_pose(d, k1, k2, opts))
+        .collect()
+}

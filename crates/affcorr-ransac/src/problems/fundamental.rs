@@ -1,0 +1,281 @@
+//! Fundamental-matrix estimation, p2ᵀ F p1 = 0 in pixels.
+//!
+//! - Minimal samples: 7 points ([`fundamental_7pt`], ≤ 3 models) or 3 ACs
+//!   ([`fundamental_3ac`]).
+//! - Non-minimal fit: the normalised 8-point algorithm on the inliers ([`fundamental_8pt`]), or
+//!   AC least squares when fewer than 8.
+//! - Residual (px²): the point Sampson distance SD_P, plus, with `affine_weight` λ > 0,
+//!   λ·(SD_A,1 + SD_A,2), the affine Sampson distances of DESIGN.md §3.
+
+use super::{Correspondences, SampleKind, epipolar_lm};
+use crate::problem::Problem;
+use crate::refine::{LeastSquares, LmOptions, Loss, Mat9, Vec9, levenberg_marquardt};
+use affcorr_geom::epipolar::skew;
+use affcorr_geom::homography::ac_from_homography;
+use affcorr_geom::sampson::{sampson_affine, sampson_point};
+use affcorr_geom::{AffineCorrespondence, Mat3, PointCorrespondence, Vec2, Vec3};
+use affcorr_solvers::fundamental::{
+    FUNDAMENTAL_3AC_MAX_SOLUTIONS, FUNDAMENTAL_7PT_MAX_SOLUTIONS, fundamental_3ac, fundamental_7pt,
+    fundamental_8pt, fundamental_ac_lsq,
+};
+use affcorr_solvers::homography::homography_2ac;
+
+const MAX_MODELS: usize = if FUNDAMENTAL_7PT_MAX_SOLUTIONS > FUNDAMENTAL_3AC_MAX_SOLUTIONS {
+    FUNDAMENTAL_7PT_MAX_SOLUTIONS
+} else {
+    FUNDAMENTAL_3AC_MAX_SOLUTIONS
+};
+
+/// A fundamental-matrix problem over a set of correspondences.
+pub struct FundamentalProblem<'a> {
+    data: &'a Correspondences,
+    kind: SampleKind,
+    affine_weight: f64,
+    threshold: f64,
+}
+
+impl<'a> FundamentalProblem<'a> {
+    /// `data` sampled as `kind`, scored with `affine_weight` λ (0: points only); `threshold`
+    /// (pixels) is the inlier threshold, used to detect planar samples.
+    pub fn new(
+        data: &'a Correspondences,
+        kind: SampleKind,
+        affine_weight: f64,
+        threshold: f64,
+    ) -> Self {
+        Self {
+            data,
+            kind,
+            affine_weight,
+            threshold,
+        }
+    }
+
+    /// Whether 3 ACs lie on one plane: the homography of the first two explains the third to
+    /// within the threshold. Such a sample fixes F only up to the epipole (F = [e]× H), so the
+    /// 3AC solver's F is arbitrary within that family (the planar degeneracy that DEGENSAC
+    /// handles for points).
+    fn planar(&self, acs: &[AffineCorrespondence; 3]) -> bool {
+        let mut h = [Mat3::zeros(); 1];
+        if homography_2ac(&acs[..2], &mut h) == 0 {
+            return false;
+        }
+        let Ok(induced) = ac_from_homography(&h[0], &acs[2].x1, 2) else {
+            return false;
+        };
+        // The affine term is measured as the displacement on a circle of radius 10 px.
+        let tol = 3.0 * self.threshold;
+        (induced.x2 - acs[2].x2).norm() < tol && (induced.a - acs[2].a).norm() * 10.0 < tol
+    }
+}
+
+/// Squared Sampson residuals (point, plus weighted affine) of `data[start..]` under `f`.
+pub(crate) fn epipolar_residuals(
+    data: &Correspondences,
+    f: &Mat3,
+    affine_weight: f64,
+    start: usize,
+    out: &mut [f64],
+) {
+    let end = start + out.len();
+    let (x1, x2) = (&data.x1[start..end], &data.x2[start..end]);
+    if affine_weight == 0.0 {
+        for ((o, p), q) in out.iter_mut().zip(x1).zip(x2) {
+            *o = sampson_point(f, &PointCorrespondence { x1: *p, x2: *q });
+        }
+        return;
+    }
+    for (k, o) in out.iter_mut().enumerate() {
+        let ac = data.ac(start + k);
+        let [a0, a1] = sampson_affine(f, &ac);
+        *o = sampson_point(f, &ac.points()) + affine_weight * (a0 + a1);
+    }
+}
+
+impl Problem for FundamentalProblem<'_> {
+    type Model = Mat3;
+
+    fn len(&self) -> usize {
+        self.data.len()
+    }
+
+    fn sample_size(&self) -> usize {
+        match self.kind {
+            SampleKind::Points => 7,
+            SampleKind::Affine => 3,
+        }
+    }
+
+    fn fit_minimal(&self, sample: &[usize], out: &mut Vec<Mat3>) {
+        let mut f = [Mat3::zeros(); MAX_MODELS];
+        let n = match self.kind {
+            SampleKind::Points => {
+                let x1: [Vec2; 7] = std::array::from_fn(|k| self.data.x1[sample[k]]);
+                let x2: [Vec2; 7] = std::array::from_fn(|k| self.data.x2[sample[k]]);
+                fundamental_7pt(&x1, &x2, &mut f)
+            }
+            SampleKind::Affine => {
+                let acs: [AffineCorrespondence; 3] =
+                    std::array::from_fn(|k| self.data.ac(sample[k]));
+                if self.planar(&acs) {
+                    return;
+                }
+                fundamental_3ac(&acs, &mut f)
+            }
+        };
+        out.extend_from_slice(&f[..n]);
+    }
+
+    fn fit_nonminimal(&self, indices: &[usize], _weights: Option<&[f64]>) -> Option<Mat3> {
+        let mut f = [Mat3::zeros(); 1];
+        let n = if indices.len() >= 8 {
+            let x1: Vec<Vec2> = indices.iter().map(|&i| self.data.x1[i]).collect();
+            let x2: Vec<Vec2> = indices.iter().map(|&i| self.data.x2[i]).collect();
+            fundamental_8pt(&x1, &x2, &mut f)
+        } else if self.data.has_affine() && indices.len() >= 3 {
+            let acs: Vec<AffineCorrespondence> = indices.iter().map(|&i| self.data.ac(i)).collect();
+            fundamental_ac_lsq(&acs, &mut f)
+        } else {
+            0
+        };
+        (n == 1).then_some(f[0])
+    }
+
+    fn residuals(&self, f: &Mat3, start: usize, out: &mut [f64]) {
+        epipolar_residuals(self.data, f, self.affine_weight, start, out);
+    }
+
+    /// Levenberg–Marquardt on the rank-2 manifold of the Sampson error with a Cauchy loss of
+    /// scale √`threshold_sq`.
+    fn refine(
+        &self,
+        model: &Mat3,
+        inliers: &[usize],
+        threshold_sq: f64,
+        max_iterations: usize,
+    ) -> Option<Mat3> {
+        let start = RankTwo::new(model)?;
+        let loss = Loss::Cauchy {
+            scale_sq: threshold_sq,
+        };
+        Some(
+            levenberg_marquardt(
+                self,
+                &start,
+                inliers,
+                &loss,
+                &LmOptions {
+                    max_iterations,
+                    ..Default::default()
+                },
+            )
+            .0
+            .matrix(),
+        )
+    }
+}
+
+/// F = U diag(1, σ, 0) Vᵀ with U, V rotations and 0 ≤ σ ≤ 1: every rank-2 matrix up to scale
+/// (Bartoli & Sturm's orthonormal representation, 7 degrees of freedom).
+#[derive(Debug, Clone, Copy)]
+pub struct RankTwo {
+    u: Mat3,
+    v: Mat3,
+    sigma: f64,
+    f: Mat3,
+}
+
+impl RankTwo {
+    /// From any F of rank ≥ 2 (the smallest singular value is dropped).
+    pub fn new(f: &Mat3) -> Option<Self> {
+        let svd = f.svd(true, true);
+        let (mut u, mut v_t) = (svd.u?, svd.v_t?);
+        let mut s = svd.singular_values;
+        // Sort descending (nalgebra does not guarantee the order).
+        for i in 0..3 {
+            for j in i + 1..3 {
+                if s[j] > s[i] {
+                    s.swap_rows(i, j);
+                    u.swap_columns(i, j);
+                    v_t.swap_rows(i, j);
+                }
+            }
+        }
+        if !(s[0] > 0.0) {
+            return None;
+        }
+        if u.determinant() < 0.0 {
+            u.column_mut(2).neg_mut();
+        }
+        if v_t.determinant() < 0.0 {
+            v_t.row_mut(2).neg_mut();
+        }
+        Some(Self::from_parts(u, v_t.transpose(), s[1] / s[0]))
+    }
+
+    fn from_parts(u: Mat3, v: Mat3, sigma: f64) -> Self {
+        let f = u * Mat3::from_diagonal(&Vec3::new(1.0, sigma, 0.0)) * v.transpose();
+        Self {
+            u,
+            v,
+            sigma,
+            f: f / f.norm(),
+        }
+    }
+
+    /// F with unit Frobenius norm.
+    pub fn matrix(&self) -> Mat3 {
+        self.f
+    }
+}
+
+/// ∂F/∂a_k = U [e_k]× S Vᵀ, ∂F/∂b_k = −U S [e_k]× Vᵀ (U ← U exp([a]×), V ← V exp([b]×)),
+/// ∂F/∂σ = U diag(0, 1, 0) Vᵀ; the unit-norm rescaling of F does not change the Sampson error.
+impl LeastSquares for FundamentalProblem<'_> {
+    type Model = RankTwo;
+
+    fn dof(&self) -> usize {
+        7
+    }
+
+    fn cost(&self, m: &RankTwo, indices: &[usize], loss: &Loss) -> f64 {
+        epipolar_lm::cost(self.data, &m.f, indices, loss)
+    }
+
+    fn normal_equations(
+        &self,
+        m: &RankTwo,
+        indices: &[usize],
+        loss: &Loss,
+        jtj: &mut Mat9,
+        jtr: &mut Vec9,
+    ) -> f64 {
+        let s = Mat3::from_diagonal(&Vec3::new(1.0, m.sigma, 0.0));
+        let (u, vt) = (m.u, m.v.transpose());
+        let e = [Vec3::x(), Vec3::y(), Vec3::z()];
+        let scale = 1.0 / (u * s * vt).norm();
+        let basis: [Mat3; 7] = std::array::from_fn(|k| {
+            let d = match k {
+                0..=2 => u * skew(&e[k]) * s * vt,
+                3..=5 => -(u * s * skew(&e[k - 3]) * vt),
+                _ => u * Mat3::from_diagonal(&Vec3::new(0.0, 1.0, 0.0)) * vt,
+            };
+            d * scale
+        });
+        epipolar_lm::normal_equations(self.data, &m.f, &basis, indices, loss, jtj, jtr)
+    }
+
+    fn retract(&self, m: &RankTwo, d: &Vec9) -> RankTwo {
+        let rot = |w: Vec3| {
+            let angle = w.norm();
+            if angle > 0.0 {
+                affcorr_geom::synthetic::rotation_about(&(w / angle), angle)
+            } else {
+                Mat3::identity()
+            }
+        };
+        let u = m.u * rot(Vec3::new(d[0], d[1], d[2]));
+        let v = m.v * rot(Vec3::new(d[3], d[4], d[5]));
+        RankTwo::from_parts(u, v, (m.sigma + d[6]).clamp(0.0, 1.0))
+    }
+}

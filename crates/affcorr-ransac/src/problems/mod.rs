@@ -1,0 +1,140 @@
+//! The three problems people use: homography, fundamental matrix, relative pose.
+//!
+//! Each keeps its data as structure of arrays ([`Correspondences`]) so residual loops stream
+//! through memory, and takes its minimal samples either as points or as ACs ([`SampleKind`]).
+
+mod epipolar_lm;
+pub mod fundamental;
+pub mod homography;
+pub mod relpose;
+
+use crate::error::{RansacError, Result};
+use affcorr_geom::types::{AcRow, PointRow};
+use affcorr_geom::{AffineCorrespondence, Mat2, Vec2};
+
+/// What a minimal sample is made of.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SampleKind {
+    /// Point correspondences (4 for H, 7 for F, 5 for E).
+    Points,
+    /// Affine correspondences (2 for H, 3 for F, 2 for E).
+    Affine,
+}
+
+/// Correspondences in structure-of-arrays form; `a` is empty for point-only data.
+#[derive(Debug, Clone, Default)]
+pub struct Correspondences {
+    /// Points in image 1.
+    pub x1: Vec<Vec2>,
+    /// Points in image 2.
+    pub x2: Vec<Vec2>,
+    /// Affine maps A = ∂x2/∂x1 (empty for point-only data).
+    pub a: Vec<Mat2>,
+}
+
+impl Correspondences {
+    /// From `(N, 8)` AC rows; non-finite rows are an error naming the row.
+    pub fn from_ac_rows(rows: &[AcRow]) -> Result<Self> {
+        check_finite(rows)?;
+        Ok(Self {
+            x1: rows.iter().map(|r| Vec2::new(r[0], r[1])).collect(),
+            x2: rows.iter().map(|r| Vec2::new(r[2], r[3])).collect(),
+            a: rows
+                .iter()
+                .map(|r| Mat2::new(r[4], r[5], r[6], r[7]))
+                .collect(),
+        })
+    }
+
+    /// From `(N, 4)` point rows.
+    pub fn from_point_rows(rows: &[PointRow]) -> Result<Self> {
+        check_finite(rows)?;
+        Ok(Self {
+            x1: rows.iter().map(|r| Vec2::new(r[0], r[1])).collect(),
+            x2: rows.iter().map(|r| Vec2::new(r[2], r[3])).collect(),
+            a: Vec::new(),
+        })
+    }
+
+    /// Number of correspondences.
+    pub fn len(&self) -> usize {
+        self.x1.len()
+    }
+
+    /// True when empty.
+    pub fn is_empty(&self) -> bool {
+        self.x1.is_empty()
+    }
+
+    /// True when the data carry affine maps.
+    pub fn has_affine(&self) -> bool {
+        !self.a.is_empty()
+    }
+
+    /// The AC at index `i` (requires affine data).
+    #[inline]
+    pub fn ac(&self, i: usize) -> AffineCorrespondence {
+        AffineCorrespondence {
+            x1: self.x1[i],
+            x2: self.x2[i],
+            a: self.a[i],
+        }
+    }
+
+    /// Gathers the points of `idx` into the caller's buffers.
+    #[inline]
+    pub fn gather_points(&self, idx: &[usize], x1: &mut Vec<Vec2>, x2: &mut Vec<Vec2>) {
+        x1.clear();
+        x2.clear();
+        x1.extend(idx.iter().map(|&i| self.x1[i]));
+        x2.extend(idx.iter().map(|&i| self.x2[i]));
+    }
+
+    /// Gathers the ACs of `idx` into the caller's buffer.
+    #[inline]
+    pub fn gather_acs(&self, idx: &[usize], out: &mut Vec<AffineCorrespondence>) {
+        out.clear();
+        out.extend(idx.iter().map(|&i| self.ac(i)));
+    }
+}
+
+fn check_finite<const W: usize>(rows: &[[f64; W]]) -> Result<()> {
+    match rows.iter().position(|r| r.iter().any(|v| !v.is_finite())) {
+        Some(index) => Err(RansacError::NonFinite {
+            what: "corrs",
+            index,
+        }),
+        None => Ok(()),
+    }
+}
+
+/// Checks that `kind` can be sampled from `data`.
+pub(crate) fn check_kind(data: &Correspondences, kind: SampleKind) -> Result<()> {
+    if kind == SampleKind::Affine && !data.has_affine() {
+        return Err(RansacError::InvalidOption {
+            name: "sample",
+            value: "affine".into(),
+            reason: "affine samples need (N, 8) correspondences with their A",
+        });
+    }
+    Ok(())
+}
+
+/// Validates an affine weight.
+pub(crate) fn check_affine_weight(w: f64, data: &Correspondences) -> Result<()> {
+    if !(w >= 0.0 && w.is_finite()) {
+        return Err(RansacError::InvalidOption {
+            name: "affine_weight",
+            value: w.to_string(),
+            reason: "must be finite and ≥ 0",
+        });
+    }
+    if w > 0.0 && !data.has_affine() {
+        return Err(RansacError::InvalidOption {
+            name: "affine_weight",
+            value: w.to_string(),
+            reason: "affine scoring needs (N, 8) correspondences",
+        });
+    }
+    Ok(())
+}

@@ -1,0 +1,258 @@
+//! Levenberg–Marquardt with robust losses (iteratively re-weighted), shared by the problems.
+//!
+//! A problem implements [`LeastSquares`]: the robust cost of a model over some data, the
+//! weighted normal equations JᵀWJ δ = −JᵀW r at a model (W from the loss, IRLS), and a retraction
+//! that applies a tangent step (so rotations stay rotations and rank-2 matrices stay rank 2).
+//! [`levenberg_marquardt`] adds the damping: (JᵀWJ + λ·diag(JᵀWJ)) δ = −JᵀW r, accepting a step
+//! only if the cost decreases (then λ /= 10), else λ *= 10.
+
+use nalgebra::{SMatrix, SVector};
+
+/// Normal-equation matrix; a problem with d < 9 degrees of freedom uses the top-left d×d block.
+pub type Mat9 = SMatrix<f64, 9, 9>;
+/// Normal-equation vector (top d entries used).
+pub type Vec9 = SVector<f64, 9>;
+
+/// A robust loss ρ(s) of a squared residual s.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Loss {
+    /// ρ(s) = s.
+    Squared,
+    /// ρ(s) = min(s, c²): inliers only (MSAC's cost).
+    Truncated {
+        /// c².
+        threshold_sq: f64,
+    },
+    /// ρ(s) = c² log(1 + s/c²): smooth, so far-away data still pull, weakly.
+    Cauchy {
+        /// c².
+        scale_sq: f64,
+    },
+}
+
+impl Loss {
+    /// ρ(s).
+    #[inline]
+    pub fn cost(&self, s: f64) -> f64 {
+        match *self {
+            Loss::Squared => s,
+            Loss::Truncated { threshold_sq } => s.min(threshold_sq),
+            Loss::Cauchy { scale_sq } => scale_sq * (s / scale_sq).ln_1p(),
+        }
+    }
+
+    /// ρ′(s), the IRLS weight.
+    #[inline]
+    pub fn weight(&self, s: f64) -> f64 {
+        match *self {
+            Loss::Squared => 1.0,
+            Loss::Truncated { threshold_sq } => f64::from(u8::from(s < threshold_sq)),
+            Loss::Cauchy { scale_sq } => 1.0 / (1.0 + s / scale_sq),
+        }
+    }
+}
+
+/// A robust nonlinear least-squares problem over a model.
+pub trait LeastSquares {
+    /// The model.
+    type Model: Clone;
+    /// Degrees of freedom (≤ 9).
+    fn dof(&self) -> usize;
+    /// Σ ρ(rᵢ²) over `indices`.
+    fn cost(&self, model: &Self::Model, indices: &[usize], loss: &Loss) -> f64;
+    /// Adds JᵀWJ and JᵀWr over `indices` at `model` (W = ρ′(r²)) and returns the cost.
+    fn normal_equations(
+        &self,
+        model: &Self::Model,
+        indices: &[usize],
+        loss: &Loss,
+        jtj: &mut Mat9,
+        jtr: &mut Vec9,
+    ) -> f64;
+    /// The model moved by the tangent step `delta` (first `dof()` entries).
+    fn retract(&self, model: &Self::Model, delta: &Vec9) -> Self::Model;
+}
+
+/// Options of [`levenberg_marquardt`].
+#[derive(Debug, Clone, Copy)]
+pub struct LmOptions {
+    /// Most iterations (accepted or rejected steps). Default 25.
+    pub max_iterations: usize,
+    /// Stop when the relative cost decrease falls below this. Default 1e-10.
+    pub cost_tolerance: f64,
+    /// Stop when ‖δ‖ falls below this. Default 1e-10.
+    pub step_tolerance: f64,
+}
+
+impl Default for LmOptions {
+    fn default() -> Self {
+        Self {
+            max_iterations: 25,
+            cost_tolerance: 1e-10,
+            step_tolerance: 1e-10,
+        }
+    }
+}
+
+/// Minimises Σ ρ(rᵢ²) from `model`; returns the final model and its cost. Never increases the
+/// cost.
+pub fn levenberg_marquardt<P: LeastSquares>(
+    problem: &P,
+    model: &P::Model,
+    indices: &[usize],
+    loss: &Loss,
+    options: &LmOptions,
+) -> (P::Model, f64) {
+    let d = problem.dof();
+    let mut model = model.clone();
+    let mut lambda = 1e-3;
+    let (mut jtj, mut jtr) = (Mat9::zeros(), Vec9::zeros());
+    let mut cost = problem.normal_equations(&model, indices, loss, &mut jtj, &mut jtr);
+    let mut fresh = true;
+    for _ in 0..options.max_iterations {
+        if !fresh {
+            jtj.fill(0.0);
+            jtr.fill(0.0);
+            cost = problem.normal_equations(&model, indices, loss, &mut jtj, &mut jtr);
+        }
+        let mut damped = jtj;
+        for k in 0..d {
+            damped[(k, k)] += lambda * jtj[(k, k)].max(1e-12);
+        }
+        for k in d..9 {
+            damped[(k, k)] = 1.0;
+        }
+        let Some(chol) = damped.cholesky() else {
+            lambda *= 10.0;
+            fresh = true;
+            continue;
+        };
+        let mut rhs = -jtr;
+        for k in d..9 {
+            rhs[k] = 0.0;
+        }
+        let delta = chol.solve(&rhs);
+        let candidate = problem.retract(&model, &delta);
+        let new_cost = problem.cost(&candidate, indices, loss);
+        if new_cost < cost {
+            let decrease = (cost - new_cost) / cost.max(f64::MIN_POSITIVE);
+            model = candidate;
+            cost = new_cost;
+            lambda = (lambda / 10.0).max(1e-12);
+            fresh = false;
+            if decrease < options.cost_tolerance || delta.norm() < options.step_tolerance {
+                break;
+            }
+        } else {
+            lambda *= 10.0;
+            fresh = true;
+            if lambda > 1e12 {
+                break;
+            }
+        }
+    }
+    (model, cost)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Fit y = exp(a x) + b: a small nonlinear problem with a known optimum.
+    struct ExpFit {
+        x: Vec<f64>,
+        y: Vec<f64>,
+    }
+
+    impl LeastSquares for ExpFit {
+        type Model = (f64, f64);
+        fn dof(&self) -> usize {
+            2
+        }
+        fn cost(&self, m: &(f64, f64), idx: &[usize], loss: &Loss) -> f64 {
+            idx.iter()
+                .map(|&i| loss.cost((self.y[i] - (m.0 * self.x[i]).exp() - m.1).powi(2)))
+                .sum()
+        }
+        fn normal_equations(
+            &self,
+            m: &(f64, f64),
+            idx: &[usize],
+            loss: &Loss,
+            jtj: &mut Mat9,
+            jtr: &mut Vec9,
+        ) -> f64 {
+            let mut cost = 0.0;
+            for &i in idx {
+                let e = (m.0 * self.x[i]).exp();
+                let r = e + m.1 - self.y[i];
+                let j = [self.x[i] * e, 1.0];
+                let w = loss.weight(r * r);
+                cost += loss.cost(r * r);
+                for a in 0..2 {
+                    jtr[a] += w * j[a] * r;
+                    for b in 0..2 {
+                        jtj[(a, b)] += w * j[a] * j[b];
+                    }
+                }
+            }
+            cost
+        }
+        fn retract(&self, m: &(f64, f64), d: &Vec9) -> (f64, f64) {
+            (m.0 + d[0], m.1 + d[1])
+        }
+    }
+
+    #[test]
+    fn converges_and_robust_losses_ignore_outliers() {
+        let x: Vec<f64> = (0..40).map(|i| i as f64 / 20.0).collect();
+        let mut y: Vec<f64> = x.iter().map(|x| (0.7 * x).exp() + 0.3).collect();
+        let idx: Vec<usize> = (0..40).collect();
+        let p = ExpFit {
+            x: x.clone(),
+            y: y.clone(),
+        };
+        let (m, cost) =
+            levenberg_marquardt(&p, &(0.0, 0.0), &idx, &Loss::Squared, &LmOptions::default());
+        assert!(
+            (m.0 - 0.7).abs() < 1e-8 && (m.1 - 0.3).abs() < 1e-8 && cost < 1e-16,
+            "{m:?}"
+        );
+        y[5] += 50.0;
+        y[17] -= 30.0;
+        let p = ExpFit { x, y };
+        let (sq, _) =
+            levenberg_marquardt(&p, &(0.5, 0.0), &idx, &Loss::Squared, &LmOptions::default());
+        let (rob, _) = levenberg_marquardt(
+            &p,
+            &(0.5, 0.0),
+            &idx,
+            &Loss::Cauchy { scale_sq: 0.01 },
+            &LmOptions::default(),
+        );
+        assert!(
+            (rob.0 - 0.7).abs() < 1e-3 && (rob.1 - 0.3).abs() < 1e-2,
+            "{rob:?}"
+        );
+        assert!(
+            (sq.1 - 0.3).abs() > 0.1,
+            "the squared loss is pulled by outliers: {sq:?}"
+        );
+    }
+
+    #[test]
+    fn losses_and_weights() {
+        let t = Loss::Truncated { threshold_sq: 4.0 };
+        assert_eq!(
+            (t.cost(1.0), t.cost(9.0), t.weight(1.0), t.weight(9.0)),
+            (1.0, 4.0, 1.0, 0.0)
+        );
+        let c = Loss::Cauchy { scale_sq: 2.0 };
+        assert!(
+            (c.cost(2.0) - 2.0 * 2f64.ln()).abs() < 1e-15 && (c.weight(2.0) - 0.5).abs() < 1e-15
+        );
+        // ρ′ is the derivative of ρ.
+        let h = 1e-6;
+        assert!(((c.cost(1.0 + h) - c.cost(1.0 - h)) / (2.0 * h) - c.weight(1.0)).abs() < 1e-8);
+    }
+}
