@@ -3,7 +3,7 @@
 //! | solver | sample | models | method |
 //! |---|---|---|---|
 //! | [`fundamental_7pt`] | 7 points | ≤ 3 | 2-dim null space + cubic det(F₁ + xF₂) = 0 |
-//! | [`fundamental_8pt`] | N ≥ 8 points | ≤ 1 | normalised 8-point, rank 2 by SVD |
+//! | [`fundamental_8pt`] | N ≥ 8 points | ≤ 1 | normalised 8-point, rank 2 enforced |
 //! | [`fundamental_3ac`] | 3 ACs | ≤ 3 (1 generically) | 9 linear equations + rank 2 |
 //! | [`fundamental_ac_lsq`] | N ≥ 3 ACs | ≤ 1 | the 3AC system over N ACs, least squares |
 //!
@@ -83,8 +83,9 @@ pub fn fundamental_7pt(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
 
 /// The normalised 8-point algorithm on N ≥ 8 point correspondences (Hartley, "In defense of the
 /// eight-point algorithm", PAMI 1997; Hartley & Zisserman, Alg. 11.1): the least-squares null
-/// vector of the N×9 epipolar system (streaming Givens QR, then the SVD of the 9×9 factor), then
-/// the closest rank-2 matrix in the Frobenius norm (smallest singular value set to zero).
+/// vector of the N×9 epipolar system (streaming Householder QR to a 9×9 factor, then inverse
+/// iteration), then the closest rank-2 matrix in the Frobenius norm: F(I − v₃v₃ᵀ), v₃ the
+/// smallest right singular vector of F (Eckart–Young), found by power iteration on adj(F)adj(F)ᵀ.
 /// Allocation-free.
 ///
 /// Returns 0 when `x1.len() != x2.len()`, N < 8, a value is not finite, or the null space is not
@@ -120,9 +121,9 @@ pub fn fundamental_8pt(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
 /// carries 3 independent constraints on F, 9 > 8; checked numerically on random multi-plane
 /// scenes in the tests.) The solver therefore takes the right singular vector of the smallest
 /// singular value (the least-squares solution with noisy data, where M has full rank) and projects
-/// it to rank 2 by its SVD, returning one model. If the second-smallest singular value vanishes
-/// as well (a 2-dim null space, a non-generic configuration), rank 2 is what pins F down: as in
-/// the 7-point solver the solutions are the real roots of det(F₁ + xF₂) = 0 over the two null
+/// it to rank 2 (closest in the Frobenius norm), returning one model. If the second-smallest
+/// singular value vanishes as well (a 2-dim null space, a non-generic configuration), rank 2 is
+/// what pins F down: as in the 7-point solver the solutions are the real roots of det(F₁ + xF₂) = 0 over the two null
 /// vectors, up to 3 models. A null space of dimension ≥ 3 (all three ACs induced by one plane:
 /// any F = [e₂]×H fits) gives 0.
 ///
@@ -149,7 +150,8 @@ pub fn fundamental_3ac(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize 
 }
 
 /// The non-minimal fundamental matrix of N ≥ 3 ACs: the system of [`fundamental_3ac`] over all
-/// ACs (3N rows), its least-squares null vector, projected to rank 2. Returns 0 when the null space is not one-dimensional.
+/// ACs (3N rows), its least-squares null vector, projected to rank 2. Returns 0 when the null
+/// space is not one-dimensional.
 pub fn fundamental_ac_lsq(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize {
     assert!(
         out.len() >= FUNDAMENTAL_AC_LSQ_MAX_SOLUTIONS,

@@ -3,7 +3,7 @@
 //! | solver | sample | models | method |
 //! |---|---|---|---|
 //! | [`homography_4pt`] | 4 points | ≤ 1 | normalised DLT, null space in closed form |
-//! | [`homography_2ac`] | 2 ACs | ≤ 1 | 12 linear equations (2 point + 4 affine per AC), least squares |
+//! | [`homography_2ac`] | 2 ACs | ≤ 1 | 12 linear equations (2 point + 4 affine per AC), LSQ |
 //! | [`homography_1ac_given_f`] | 1 AC + F | ≤ 1 | H = −[e₂]×F + e₂vᵀ, 6 linear equations in v |
 //! | [`homography_lsq`] | N ≥ 4 points | ≤ 1 | normalised DLT, least squares |
 //! | [`homography_ac_lsq`] | N ≥ 2 ACs | ≤ 1 | the 2AC system over N ACs, least squares |
@@ -70,7 +70,12 @@ const RANK_TOL: f64 = 1e-9;
 /// use affcorr_geom::{Mat3, Vec2, Vec3};
 /// use affcorr_solvers::homography::{homography_4pt, HOMOGRAPHY_4PT_MAX_SOLUTIONS};
 /// let h = Mat3::new(1.1, 0.1, 5.0, -0.05, 0.9, 3.0, 1e-4, 2e-4, 1.0);
-/// let x1 = [Vec2::new(0.0, 0.0), Vec2::new(100.0, 0.0), Vec2::new(100.0, 80.0), Vec2::new(10.0, 90.0)];
+/// let x1 = [
+///     Vec2::new(0.0, 0.0),
+///     Vec2::new(100.0, 0.0),
+///     Vec2::new(100.0, 80.0),
+///     Vec2::new(10.0, 90.0),
+/// ];
 /// let x2 = x1.map(|p| (h * Vec3::new(p.x, p.y, 1.0)).xy() / (h * Vec3::new(p.x, p.y, 1.0)).z);
 /// let mut out = [Mat3::zeros(); HOMOGRAPHY_4PT_MAX_SOLUTIONS];
 /// assert_eq!(homography_4pt(&x1, &x2, &mut out), 1);
@@ -167,8 +172,9 @@ pub fn homography_ac_lsq(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usiz
 }
 
 /// The non-minimal normalised DLT on N ≥ 4 point correspondences (Hartley & Zisserman,
-/// Alg. 4.2): the 2N×9 system folded into a 9×9 triangular factor by Givens rotations, then the
-/// right singular vector of its smallest singular value. Allocation-free.
+/// Alg. 4.2): the 2N×9 system folded into a 9×9 triangular factor by blocked Householder QR,
+/// then the right singular vector of its smallest singular value by inverse iteration
+/// ([`crate::normalization`]). Allocation-free.
 ///
 /// Returns 0 when `x1.len() != x2.len()`, N < 4, a value is not finite, or the null space is not
 /// one-dimensional (e.g. all points collinear).

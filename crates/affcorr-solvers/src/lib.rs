@@ -7,7 +7,8 @@
 //! - [`essential`]: E from 5 points, 2 ACs, N ≥ 8 points (+ ACs); calibrated, normalised input.
 //! - [`relpose`]: relative poses (R, t) from those solvers, via decomposition + cheirality.
 //! - `normalization` (private): Hartley normalisation and the allocation-free linear algebra
-//!   (complete-pivoting Gauss–Jordan, streaming Givens QR) shared by the H and F solvers.
+//!   (complete-pivoting Gauss–Jordan, streaming Householder QR, inverse iteration) shared by the
+//!   H and F solvers.
 //!
 //! Solvers are being added (issue #3).
 
