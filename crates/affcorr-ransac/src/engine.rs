@@ -274,6 +274,26 @@ const LO_LM_ITERATIONS: usize = 20;
 /// Levenberg–Marquardt steps of the final refinement.
 const FINAL_LM_ITERATIONS: usize = 100;
 
+/// Local optimisation fits on at most this many inliers (an even stride through them): enough
+/// to pin a model with ≤ 9 degrees of freedom, and it keeps LO's cost independent of N. The
+/// score is still computed on all data, and the final refinement uses all inliers.
+const LO_MAX_FIT: usize = 512;
+
+/// Keeps an even stride of at most `max` entries of `indices` (and their weights).
+fn thin_out(indices: &mut Vec<usize>, weights: &mut Vec<f64>, max: usize) {
+    let n = indices.len();
+    if n <= max {
+        return;
+    }
+    for k in 0..max {
+        let src = k * n / max;
+        indices[k] = indices[src];
+        weights[k] = weights[src];
+    }
+    indices.truncate(max);
+    weights.truncate(max);
+}
+
 /// Iterated least squares on the inliers at shrinking thresholds, then at the true threshold
 /// while the score improves. Each step starts from the best model so far, collects its inliers
 /// at the step's threshold, and tries two candidates: the linear fit on them and the nonlinear
@@ -294,6 +314,7 @@ fn local_optimization<P: Problem, S: Scoring>(
         if indices.len() <= problem.sample_size() {
             break;
         }
+        thin_out(indices, weights, LO_MAX_FIT);
         let threshold_sq = scoring.inlier_threshold_sq() * scale * scale;
         let refined = problem.refine(&best.model, indices, threshold_sq, LO_LM_ITERATIONS);
         let linear = problem.fit_nonminimal(indices, Some(weights));
