@@ -3,7 +3,7 @@
 //! This facade re-exports the workspace crates; add only `affcorr` to your `Cargo.toml`.
 //! - [`geom`]: conventions, AC synthesis/decomposition, Sampson distances, epipolar utilities.
 //! - [`solvers`]: minimal and non-minimal solvers.
-//! - [`ransac`]: robust estimation (issue #4, not yet implemented).
+//! - [`ransac`]: robust estimation of H, F and relative pose from points or ACs.
 //! - [`runner`]: ONNX networks (issues #5, #6, not yet implemented).
 //!
 //! ```
