@@ -112,6 +112,62 @@ impl PlaneScene {
     }
 }
 
+/// Settings of [`noisy_correspondences`].
+#[derive(Debug, Clone, Copy)]
+pub struct NoiseModel {
+    /// Number of planes (the first is the scene's own; the others get random tilts up to ~57°
+    /// and distances 2–10): 1 gives a homography scene, several a general one.
+    pub planes: usize,
+    /// Fraction of correspondences replaced by random ones (random x2 and a random similarity A).
+    pub outlier_ratio: f64,
+    /// Standard deviation of the Gaussian noise added to x2, pixels.
+    pub pixel_noise: f64,
+    /// Relative noise on A: A ← A (I + N) with N's entries Gaussian of this deviation.
+    pub affine_noise: f64,
+}
+
+/// A standard normal sample (Box–Muller), so callers need no extra dependency.
+pub fn gaussian<R: Rng + ?Sized>(rng: &mut R) -> f64 {
+    let (u, v): (f64, f64) = (rng.random::<f64>().max(1e-300), rng.random());
+    (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
+}
+
+/// `n` ACs of `scene`'s cameras looking at `noise.planes` planes, with noise and outliers, and
+/// which of them are inliers. Rows are grouped by plane.
+pub fn noisy_correspondences<R: Rng + ?Sized>(
+    rng: &mut R,
+    scene: &PlaneScene,
+    n: usize,
+    noise: &NoiseModel,
+) -> (Vec<AffineCorrespondence>, Vec<bool>) {
+    let mut acs = Vec::with_capacity(n);
+    let per_plane = n.div_ceil(noise.planes.max(1));
+    for p in 0..noise.planes.max(1) {
+        let mut s = *scene;
+        if p > 0 {
+            s.normal = rotation_about(&random_unit(rng), rng.random_range(-1.0..1.0)) * Vec3::z();
+            s.distance = rng.random_range(2.0..10.0);
+        }
+        let take = per_plane.min(n - acs.len());
+        acs.extend(s.sample(rng, take));
+    }
+    let mut is_inlier = Vec::with_capacity(n);
+    for ac in acs.iter_mut() {
+        let outlier = rng.random::<f64>() < noise.outlier_ratio;
+        if outlier {
+            let t: f64 = rng.random_range(-3.0..3.0);
+            ac.x2 = Vec2::new(rng.random_range(0.0..640.0), rng.random_range(0.0..480.0));
+            ac.a = crate::affine::rotation(t) * rng.random_range(0.5..2.0);
+        } else {
+            ac.x2 += Vec2::new(gaussian(rng), gaussian(rng)) * noise.pixel_noise;
+            let n = crate::Mat2::new(gaussian(rng), gaussian(rng), gaussian(rng), gaussian(rng));
+            ac.a += ac.a * n * noise.affine_noise;
+        }
+        is_inlier.push(!outlier);
+    }
+    (acs, is_inlier)
+}
+
 /// A uniformly distributed unit vector.
 pub fn random_unit<R: Rng + ?Sized>(rng: &mut R) -> Vec3 {
     loop {

@@ -4,24 +4,18 @@
 //! truth; we add pixel noise to x2, relative noise to A, and replace a fraction of the
 //! correspondences by random ones.
 
-use affcorr_geom::synthetic::{PlaneScene, random_unit, rotation_about};
-use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2, Vec3};
+use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
+use affcorr_geom::{Mat3, Vec3};
 use affcorr_ransac::{
     Correspondences, EstimatorOptions, RansacOptions, SampleKind, SamplerKind,
     estimate_fundamental, estimate_homography, estimate_relative_pose,
 };
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_pcg::Pcg64;
 
 struct Noisy {
     data: Correspondences,
     is_inlier: Vec<bool>,
-}
-
-/// Gaussian sample by Box–Muller (keeps the test free of extra dependencies).
-fn gauss(rng: &mut Pcg64) -> f64 {
-    let (u, v): (f64, f64) = (rng.random::<f64>().max(1e-300), rng.random());
-    (-2.0 * u.ln()).sqrt() * (2.0 * std::f64::consts::PI * v).cos()
 }
 
 /// ACs from `planes` planes of `scene`'s cameras, with noise and outliers.
@@ -30,43 +24,17 @@ fn make_data(
     scene: &PlaneScene,
     planes: usize,
     n: usize,
-    outliers: f64,
-    px: f64,
-    aff: f64,
+    outlier_ratio: f64,
+    pixel_noise: f64,
+    affine_noise: f64,
 ) -> Noisy {
-    let mut acs = Vec::with_capacity(n);
-    let mut is_inlier = Vec::with_capacity(n);
-    let per_plane = n.div_ceil(planes);
-    for p in 0..planes {
-        let mut s = *scene;
-        if p > 0 {
-            // Planes at different depths and tilts: a general scene, not a near-planar one
-            // (on which F is ill-conditioned for any estimator).
-            s.normal = rotation_about(&random_unit(rng), rng.random_range(-1.0..1.0)) * Vec3::z();
-            s.distance = rng.random_range(2.0..10.0);
-        }
-        for ac in s.sample(rng, per_plane.min(n - acs.len())) {
-            acs.push(ac);
-        }
-    }
-    for ac in acs.iter_mut() {
-        let outlier = rng.random::<f64>() < outliers;
-        if outlier {
-            let r = Mat2::new(1.0, 0.0, 0.0, 1.0) * rng.random_range(0.5..2.0);
-            let t: f64 = rng.random_range(-3.0..3.0);
-            let rot = Mat2::new(t.cos(), -t.sin(), t.sin(), t.cos());
-            *ac = AffineCorrespondence {
-                x1: ac.x1,
-                x2: Vec2::new(rng.random_range(0.0..640.0), rng.random_range(0.0..480.0)),
-                a: rot * r,
-            };
-        } else {
-            ac.x2 += Vec2::new(gauss(rng), gauss(rng)) * px;
-            let noise = Mat2::new(gauss(rng), gauss(rng), gauss(rng), gauss(rng)) * aff;
-            ac.a += ac.a * noise;
-        }
-        is_inlier.push(!outlier);
-    }
+    let noise = NoiseModel {
+        planes,
+        outlier_ratio,
+        pixel_noise,
+        affine_noise,
+    };
+    let (acs, is_inlier) = noisy_correspondences(rng, scene, n, &noise);
     let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
     Noisy {
         data: Correspondences::from_ac_rows(&rows).unwrap(),
@@ -84,6 +52,7 @@ fn options(threshold: f64, kind: SampleKind, seed: u64) -> EstimatorOptions {
         ransac: RansacOptions {
             threshold,
             seed,
+
             ..Default::default()
         },
         sample: Some(kind),
@@ -156,7 +125,7 @@ fn relative_pose_at_50_percent_outliers_points_and_acs() {
     let mut rng = Pcg64::seed_from_u64(12);
     for trial in 0..5 {
         let scene = PlaneScene::random(&mut rng);
-        let d = make_data(&mut rng, &scene, 3, 1000, 0.5, 0.5, 0.02);
+        let d = make_data(&mut rng, &scene, 5, 1000, 0.5, 0.5, 0.02);
         for kind in [SampleKind::Points, SampleKind::Affine] {
             let est =
                 estimate_relative_pose(&d.data, &scene.k1, &scene.k2, &options(1.5, kind, trial))
