@@ -198,64 +198,81 @@ fn gauss_jordan(a: &mut [[f64; 20]; 10]) -> bool {
     true
 }
 
-/// Gauss–Newton on the ten cubic constraints A·m(x, y, z) = 0 (at most six steps, stopping
-/// when the step is at rounding level): restores full precision where the univariate root or
-/// B(z) is ill-conditioned (near-planar scenes, clustered roots). Skipped when the constraints
-/// already hold to rounding level, the usual case.
+/// Gauss–Newton on the ten cubic constraints A·m(x, y, z) = 0: restores full precision where
+/// the univariate root or B(z) is ill-conditioned (near-planar scenes, clustered roots).
+///
+/// One step is always taken (it costs what a residual test would, and on a zero-residual
+/// system it squares the relative error); further steps (at most five) only while the last one
+/// was not already below 1e-9 of the variables' scale, since the error after a step of size δ
+/// is O(δ²). Monomials and their partial derivatives are written out in [`CUBIC`]'s order.
 fn polish(a: &[[f64; 20]; 10], mut x: f64, mut y: f64, mut z: f64) -> (f64, f64, f64) {
-    let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-    for iter in 0..6 {
-        let px = [1.0, x, x * x, x * x * x];
-        let py = [1.0, y, y * y, y * y * y];
-        let pz = [1.0, z, z * z, z * z * z];
-        let mut v = [0.0; 20];
-        for (m, e) in CUBIC.iter().enumerate() {
-            v[m] = px[e[0] as usize] * py[e[1] as usize] * pz[e[2] as usize];
+    for _ in 0..6 {
+        let (x2, y2, z2) = (x * x, y * y, z * z);
+        let (xy, xz, yz) = (x * y, x * z, y * z);
+        #[rustfmt::skip]
+        let v = [
+            x2 * x, y2 * y, x2 * y, x * y2, x2 * z, x2, y2 * z, y2, xy * z, xy,
+            x * z2, xz, x, y * z2, yz, y, z2 * z, z2, z, 1.0,
+        ];
+        #[rustfmt::skip]
+        let dx = [
+            3.0 * x2, 0.0, 2.0 * xy, y2, 2.0 * xz, 2.0 * x, 0.0, 0.0, yz, y,
+            z2, z, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+        ];
+        #[rustfmt::skip]
+        let dy = [
+            0.0, 3.0 * y2, x2, 2.0 * xy, 0.0, 0.0, 2.0 * yz, 2.0 * y, xz, x,
+            0.0, 0.0, 0.0, z2, z, 1.0, 0.0, 0.0, 0.0, 0.0,
+        ];
+        #[rustfmt::skip]
+        let dz = [
+            0.0, 0.0, 0.0, 0.0, x2, 0.0, y2, 0.0, xy, 0.0,
+            2.0 * xz, x, 0.0, 2.0 * yz, y, 0.0, 3.0 * z2, 2.0 * z, 1.0, 0.0,
+        ];
+        // Normal equations JᵀJ s = Jᵀr (upper triangle of JᵀJ).
+        let (mut h00, mut h01, mut h02, mut h11, mut h12, mut h22) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let (mut g0, mut g1, mut g2) = (0.0, 0.0, 0.0);
+        for row in a {
+            let (mut r, mut j0, mut j1, mut j2) = (0.0, 0.0, 0.0, 0.0);
+            for m in 0..20 {
+                r += row[m] * v[m];
+                j0 += row[m] * dx[m];
+                j1 += row[m] * dy[m];
+                j2 += row[m] * dz[m];
+            }
+            h00 += j0 * j0;
+            h01 += j0 * j1;
+            h02 += j0 * j2;
+            h11 += j1 * j1;
+            h12 += j1 * j2;
+            h22 += j2 * j2;
+            g0 += j0 * r;
+            g1 += j1 * r;
+            g2 += j2 * r;
         }
-        let mut res = [0.0; 10];
-        for (r, row) in a.iter().enumerate() {
-            res[r] = row.iter().zip(&v).map(|(c, m)| c * m).sum();
-        }
-        let vmax = v.iter().fold(0.0f64, |m, t| m.max(t.abs()));
-        let rmax = res.iter().fold(0.0f64, |m, t| m.max(t.abs()));
-        if iter == 0 && rmax <= 1e-14 * scale * vmax {
+        // Solve by the adjugate of the symmetric 3×3 matrix.
+        let c00 = h11 * h22 - h12 * h12;
+        let c01 = h02 * h12 - h01 * h22;
+        let c02 = h01 * h12 - h02 * h11;
+        let det = h00 * c00 + h01 * c01 + h02 * c02;
+        if !(det > 0.0 && det.is_finite()) {
             break;
         }
-        let mut d = [[0.0; 20]; 3];
-        for (m, e) in CUBIC.iter().enumerate() {
-            let (i, j, k) = (e[0] as usize, e[1] as usize, e[2] as usize);
-            if i > 0 {
-                d[0][m] = i as f64 * px[i - 1] * py[j] * pz[k];
-            }
-            if j > 0 {
-                d[1][m] = j as f64 * px[i] * py[j - 1] * pz[k];
-            }
-            if k > 0 {
-                d[2][m] = k as f64 * px[i] * py[j] * pz[k - 1];
-            }
+        let c11 = h00 * h22 - h02 * h02;
+        let c12 = h01 * h02 - h00 * h12;
+        let c22 = h00 * h11 - h01 * h01;
+        let inv = 1.0 / det;
+        let s0 = (c00 * g0 + c01 * g1 + c02 * g2) * inv;
+        let s1 = (c01 * g0 + c11 * g1 + c12 * g2) * inv;
+        let s2 = (c02 * g0 + c12 * g1 + c22 * g2) * inv;
+        if !(s0.is_finite() && s1.is_finite() && s2.is_finite()) {
+            break;
         }
-        let mut jtj = nalgebra::Matrix3::<f64>::zeros();
-        let mut jtr = nalgebra::Vector3::<f64>::zeros();
-        for (r, row) in a.iter().enumerate() {
-            let j = nalgebra::Vector3::new(
-                row.iter().zip(&d[0]).map(|(c, m)| c * m).sum(),
-                row.iter().zip(&d[1]).map(|(c, m)| c * m).sum(),
-                row.iter().zip(&d[2]).map(|(c, m)| c * m).sum(),
-            );
-            jtj += j * j.transpose();
-            jtr += j * res[r];
-        }
-        match jtj.cholesky() {
-            Some(c) => {
-                let s = c.solve(&jtr);
-                x -= s.x;
-                y -= s.y;
-                z -= s.z;
-                if s.norm() <= 1e-15 * (1.0 + x.abs() + y.abs() + z.abs()) {
-                    break;
-                }
-            }
-            None => break,
+        x -= s0;
+        y -= s1;
+        z -= s2;
+        if s0.abs() + s1.abs() + s2.abs() <= 1e-9 * (1.0 + x.abs() + y.abs() + z.abs()) {
+            break;
         }
     }
     (x, y, z)
