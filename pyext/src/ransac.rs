@@ -483,6 +483,22 @@ fn batch_intrinsics(
     })
 }
 
+/// A batch of a 3×3-matrix estimator (H or F) as a list of `(model, info)`.
+fn matrix_batch<'py>(
+    py: Python<'py>,
+    corrs: &Bound<'py, PyAny>,
+    options: Option<&Bound<'py, PyDict>>,
+    estimator: fn(&Correspondences, &EstimatorOptions) -> affcorr::ransac::Result<Estimate<Mat3>>,
+) -> PyResult<Bound<'py, PyList>> {
+    let batch = read_batch(corrs, options)?;
+    let out = run_batch(py, &batch, nan_mat3(), |_, d, o| estimator(d, o))?;
+    let items = out
+        .iter()
+        .map(|o| mat_result(py, o))
+        .collect::<PyResult<Vec<_>>>()?;
+    PyList::new(py, items)
+}
+
 #[pyfunction]
 #[pyo3(name = "estimate_homography_batch", signature = (corrs, *, **options))]
 fn estimate_homography_batch_py<'py>(
@@ -490,13 +506,7 @@ fn estimate_homography_batch_py<'py>(
     corrs: &Bound<'py, PyAny>,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyList>> {
-    let batch = read_batch(corrs, options)?;
-    let out = run_batch(py, &batch, nan_mat3(), |_, d, o| estimate_homography(d, o))?;
-    let items = out
-        .iter()
-        .map(|o| mat_result(py, o))
-        .collect::<PyResult<Vec<_>>>()?;
-    PyList::new(py, items)
+    matrix_batch(py, corrs, options, estimate_homography)
 }
 
 #[pyfunction]
@@ -506,13 +516,7 @@ fn estimate_fundamental_batch_py<'py>(
     corrs: &Bound<'py, PyAny>,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyList>> {
-    let batch = read_batch(corrs, options)?;
-    let out = run_batch(py, &batch, nan_mat3(), |_, d, o| estimate_fundamental(d, o))?;
-    let items = out
-        .iter()
-        .map(|o| mat_result(py, o))
-        .collect::<PyResult<Vec<_>>>()?;
-    PyList::new(py, items)
+    matrix_batch(py, corrs, options, estimate_fundamental)
 }
 
 #[pyfunction]

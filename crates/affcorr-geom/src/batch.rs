@@ -54,6 +54,43 @@ where
     let _ = try_fill::<T, std::convert::Infallible, _>(out, |i| Ok(f(i)));
 }
 
+/// [`try_fill`] for three outputs (struct of arrays): `(a[i], b[i], c[i]) = f(i)`, with
+/// the same threshold, chunking and smallest-failing-index error. The `*_columns` forms use it to
+/// write straight into the caller's (e.g. numpy's) arrays, with no intermediate rows.
+pub(crate) fn try_fill3<A, B, C, E, F>(a: &mut [A], b: &mut [B], c: &mut [C], f: F) -> Result<(), E>
+where
+    A: Send,
+    B: Send,
+    C: Send,
+    E: Send,
+    F: Fn(usize) -> Result<(A, B, C), E> + Sync,
+{
+    debug_assert!(a.len() == b.len() && a.len() == c.len());
+    if a.len() < PARALLEL_MIN_LEN {
+        for (i, ((x, y), z)) in a.iter_mut().zip(b.iter_mut()).zip(c.iter_mut()).enumerate() {
+            (*x, *y, *z) = f(i)?;
+        }
+        return Ok(());
+    }
+    let first_error = a
+        .par_chunks_mut(CHUNK)
+        .zip(b.par_chunks_mut(CHUNK))
+        .zip(c.par_chunks_mut(CHUNK))
+        .enumerate()
+        .filter_map(|(chunk, ((ca, cb), cc))| {
+            let rows = ca.iter_mut().zip(cb.iter_mut()).zip(cc.iter_mut());
+            for (k, ((x, y), z)) in rows.enumerate() {
+                match f(chunk * CHUNK + k) {
+                    Ok(v) => (*x, *y, *z) = v,
+                    Err(e) => return Some((chunk, e)),
+                }
+            }
+            None
+        })
+        .min_by_key(|(chunk, _)| *chunk);
+    first_error.map_or(Ok(()), |(_, e)| Err(e))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -487,44 +487,6 @@ pub fn sampson_affine_grad_batch<'a>(
     })
 }
 
-/// [`batch::try_fill`] for three outputs (struct of arrays): `(a[i], b[i], c[i]) = f(i)`, with
-/// the same threshold, chunking and smallest-failing-index error. The `*_columns` forms use it to
-/// write straight into the caller's (e.g. numpy's) arrays, with no intermediate rows.
-fn try_fill3<A, B, C, F>(a: &mut [A], b: &mut [B], c: &mut [C], f: F) -> Result<()>
-where
-    A: Send,
-    B: Send,
-    C: Send,
-    F: Fn(usize) -> Result<(A, B, C)> + Sync,
-{
-    const CHUNK: usize = 1024;
-    debug_assert!(a.len() == b.len() && a.len() == c.len());
-    if a.len() < batch::PARALLEL_MIN_LEN {
-        for (i, ((x, y), z)) in a.iter_mut().zip(b.iter_mut()).zip(c.iter_mut()).enumerate() {
-            (*x, *y, *z) = f(i)?;
-        }
-        return Ok(());
-    }
-    use rayon::prelude::*;
-    let first_error = a
-        .par_chunks_mut(CHUNK)
-        .zip(b.par_chunks_mut(CHUNK))
-        .zip(c.par_chunks_mut(CHUNK))
-        .enumerate()
-        .filter_map(|(chunk, ((ca, cb), cc))| {
-            let rows = ca.iter_mut().zip(cb.iter_mut()).zip(cc.iter_mut());
-            for (k, ((x, y), z)) in rows.enumerate() {
-                match f(chunk * CHUNK + k) {
-                    Ok(v) => (*x, *y, *z) = v,
-                    Err(e) => return Some((chunk, e)),
-                }
-            }
-            None
-        })
-        .min_by_key(|(chunk, _)| *chunk);
-    first_error.map_or(Ok(()), |(_, e)| Err(e))
-}
-
 /// Runs `kernel(F_i, i)` into three outputs, checking the lengths and F's entries.
 fn run3<A, B, C, K>(
     f: Fundamentals<'_>,
@@ -545,11 +507,11 @@ where
     match f {
         Fundamentals::Shared(f) => {
             check_f(f)?;
-            try_fill3(a, b, c, |i| kernel(f, i))
+            batch::try_fill3(a, b, c, |i| kernel(f, i))
         }
         Fundamentals::PerRow(fs) => {
             check_len("F", n, fs.len())?;
-            try_fill3(a, b, c, |i| {
+            batch::try_fill3(a, b, c, |i| {
                 if !fs[i].iter().all(|v| v.is_finite()) {
                     return Err(GeomError::NonFinite {
                         what: "F",
