@@ -23,11 +23,22 @@ const VANISHING_W: f64 = 1e-12;
 /// ```
 #[inline]
 pub fn ac_from_homography(h: &Mat3, x1: &Vec2, index: usize) -> Result<AffineCorrespondence> {
+    ac_with_tolerance(h, x1, index, VANISHING_W * h.norm())
+}
+
+/// [`ac_from_homography`] with the vanishing tolerance on |w| computed once per batch.
+#[inline]
+fn ac_with_tolerance(
+    h: &Mat3,
+    x1: &Vec2,
+    index: usize,
+    tolerance: f64,
+) -> Result<AffineCorrespondence> {
     if !x1.x.is_finite() || !x1.y.is_finite() {
         return Err(GeomError::NonFinite { what: "x1", index });
     }
     let w = h[(2, 0)] * x1.x + h[(2, 1)] * x1.y + h[(2, 2)];
-    if w.abs() <= VANISHING_W * h.norm() {
+    if w.abs() <= tolerance {
         return Err(GeomError::PointAtInfinity { index, w });
     }
     let x2 = Vec2::new(
@@ -47,8 +58,9 @@ pub fn ac_from_homography(h: &Mat3, x1: &Vec2, index: usize) -> Result<AffineCor
 pub fn correspondences_from_homography(h: &Mat3, x1: &[[f64; 2]], out: &mut [AcRow]) -> Result<()> {
     check_homography(h)?;
     check_len("out", x1.len(), out.len())?;
+    let tolerance = VANISHING_W * h.norm();
     batch::try_fill(out, |i| {
-        ac_from_homography(h, &Vec2::new(x1[i][0], x1[i][1]), i).map(|ac| ac.to_row())
+        ac_with_tolerance(h, &Vec2::new(x1[i][0], x1[i][1]), i, tolerance).map(|ac| ac.to_row())
     })
 }
 
@@ -56,8 +68,9 @@ pub fn correspondences_from_homography(h: &Mat3, x1: &[[f64; 2]], out: &mut [AcR
 pub fn affine_from_homography(h: &Mat3, x1: &[[f64; 2]], out: &mut [[f64; 4]]) -> Result<()> {
     check_homography(h)?;
     check_len("out", x1.len(), out.len())?;
+    let tolerance = VANISHING_W * h.norm();
     batch::try_fill(out, |i| {
-        ac_from_homography(h, &Vec2::new(x1[i][0], x1[i][1]), i)
+        ac_with_tolerance(h, &Vec2::new(x1[i][0], x1[i][1]), i, tolerance)
             .map(|ac| crate::types::mat2_to_row(&ac.a))
     })
 }
