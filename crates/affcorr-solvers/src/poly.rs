@@ -70,11 +70,17 @@ fn quadratic(a: f64, b: f64, c: f64, roots: &mut [f64]) -> usize {
     2
 }
 
-/// The Sturm sequence of `p`; returns the number of polynomials and their degrees.
+/// Lanes of the transposed Sturm sequence (LEN rounded up to an even count for SIMD).
+const LANES: usize = LEN + 1;
+
+/// The Sturm sequence of `p`, stored transposed for evaluation: `t[i][k]` is the coefficient of
+/// xⁱ in the k-th polynomial (zero above its degree and for k ≥ `len`), so all members are
+/// evaluated together by one lane-parallel Horner scheme of `top + 1` steps.
 struct Sturm {
     seq: [[f64; LEN]; LEN],
     deg: [usize; LEN],
     len: usize,
+    t: [[f64; LANES]; LEN],
 }
 
 impl Sturm {
@@ -83,6 +89,7 @@ impl Sturm {
             seq: [[0.0; LEN]; LEN],
             deg: [0; LEN],
             len: 2,
+            t: [[0.0; LANES]; LEN],
         };
         let d = p.len() - 1;
         // Monic p keeps the remainders well scaled.
@@ -126,15 +133,25 @@ impl Sturm {
             s.deg[k] = rd;
             s.len += 1;
         }
+        for k in 0..s.len {
+            for i in 0..=s.deg[k] {
+                s.t[i][k] = s.seq[k][i];
+            }
+        }
         s
     }
 
     /// Sign changes of the sequence at x.
     fn sign_changes(&self, x: f64) -> u32 {
+        let mut acc = [0.0; LANES];
+        for row in self.t[..=self.deg[0]].iter().rev() {
+            for k in 0..LANES {
+                acc[k] = acc[k] * x + row[k];
+            }
+        }
         let mut changes = 0;
         let mut last = 0.0f64;
-        for k in 0..self.len {
-            let v = eval(&self.seq[k][..=self.deg[k]], x);
+        for &v in &acc[..self.len] {
             if v != 0.0 {
                 if last != 0.0 && (v > 0.0) != (last > 0.0) {
                     changes += 1;
@@ -153,15 +170,25 @@ fn sturm_roots(p: &[f64], roots: &mut [f64]) -> usize {
     // Fujiwara's bound: every root has |x| ≤ 2·max(|c_{d−k}/c_d|^{1/k}, |c_0/(2c_d)|^{1/d}),
     // far tighter than Cauchy's 1 + max |c_i/c_d| when the leading coefficient is small, which
     // saves bisection levels. Slightly enlarged so a root on the bound stays inside (lo, hi].
-    let mut fujiwara = 0.0f64;
+    // Each c^{1/k} is bounded by the power of two 2^⌈e/k⌉ with c < 2^e read off the exponent
+    // bits (at most 2× looser, one more bisection level, but no `powf`).
+    let mut exp = i32::MIN;
     for k in 1..=d {
         let c = if k == d {
             0.5 * monic[0].abs()
         } else {
             monic[d - k].abs()
         };
-        fujiwara = fujiwara.max(c.powf(1.0 / k as f64));
+        if c > 0.0 {
+            let e = ((c.to_bits() >> 52) & 0x7ff) as i32 - 1022;
+            exp = exp.max(-((-e).div_euclid(k as i32)));
+        }
     }
+    let fujiwara = if exp == i32::MIN {
+        0.0
+    } else {
+        2.0f64.powi(exp.min(1023))
+    };
     let bound = 2.0 * fujiwara * (1.0 + 1e-10) + f64::MIN_POSITIVE;
     let (lo, hi) = (-bound, bound);
     let mut stack = [(0.0, 0.0, 0u32, 0u32, 0u32); 4 * LEN];
@@ -226,7 +253,8 @@ fn refine(p: &[f64], mut a: f64, mut b: f64) -> f64 {
                 0.5 * (a + b)
             };
         step = next - x;
-        if step.abs() <= 1e-15 * x.abs().max(1e-300) || b - a <= 1e-15 * a.abs().max(b.abs()) {
+        // A Newton step of relative size 1e-11 leaves an error of order its square: converged.
+        if step.abs() <= 1e-11 * x.abs().max(1e-300) || b - a <= 1e-15 * a.abs().max(b.abs()) {
             return next;
         }
         x = next;
