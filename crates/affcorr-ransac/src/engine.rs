@@ -44,17 +44,27 @@ struct Scored<M> {
     inliers: usize,
 }
 
-/// Scores `model` on all data; `None` as soon as it cannot beat `to_beat`.
+/// A model's score, its inliers, and its support at [`LO_TRIGGER_SCALE`] × the threshold.
+struct Evaluation {
+    score: f64,
+    inliers: usize,
+    wide_support: usize,
+}
+
+/// Scores `model` on all data; `None` as soon as it can beat neither `to_beat` (the best score)
+/// nor `wide_to_beat` (the best wide support).
 fn score_model<P: Problem, S: Scoring>(
     problem: &P,
     scoring: &S,
     model: &P::Model,
     to_beat: f64,
+    wide_to_beat: usize,
     buf: &mut [f64],
-) -> Option<(f64, usize)> {
+) -> Option<Evaluation> {
     let n = problem.len();
     let thr = scoring.inlier_threshold_sq();
-    let (mut score, mut inliers) = (0.0, 0usize);
+    let wide_thr = thr * LO_TRIGGER_SCALE * LO_TRIGGER_SCALE;
+    let (mut score, mut inliers, mut wide_support) = (0.0, 0usize, 0usize);
     let mut start = 0;
     while start < n {
         let len = BLOCK.min(n - start);
@@ -63,14 +73,20 @@ fn score_model<P: Problem, S: Scoring>(
         for &r2 in block.iter() {
             score += scoring.quality(r2);
             inliers += usize::from(r2 < thr);
+            wide_support += usize::from(r2 < wide_thr);
         }
         start += len;
-        // Even if every remaining datum were perfect (quality 1), could it still win?
-        if score + (n - start) as f64 <= to_beat {
+        // Even if every remaining datum were perfect, could it still win on either count?
+        let rest = n - start;
+        if score + rest as f64 <= to_beat && wide_support + rest <= wide_to_beat {
             return None;
         }
     }
-    Some((score, inliers))
+    Some(Evaluation {
+        score,
+        inliers,
+        wide_support,
+    })
 }
 
 /// Indices of the data with squared residual below `scale²` × the inlier threshold, and their
@@ -177,6 +193,7 @@ where
     let (mut lo_indices, mut lo_weights) = (Vec::with_capacity(n), Vec::with_capacity(n));
 
     let mut best: Option<Scored<P::Model>> = None;
+    let mut best_wide_support = 0usize;
     let mut bound = options.max_iterations;
     let (mut iterations, mut lo_runs) = (0, 0);
     while iterations
@@ -190,19 +207,26 @@ where
         problem.fit_minimal(&sample, &mut models);
         for model in models.drain(..) {
             let to_beat = best.as_ref().map_or(0.0, |b| b.score);
-            let Some((score, inliers)) = score_model(problem, scoring, &model, to_beat, &mut buf)
+            let lo = options.local_optimization;
+            let wide_to_beat = if lo { best_wide_support } else { usize::MAX };
+            let Some(e) = score_model(problem, scoring, &model, to_beat, wide_to_beat, &mut buf)
             else {
                 continue;
             };
-            if score <= to_beat {
+            // A hypothesis that is not the best at the threshold but has the widest support so
+            // far is probably a noisy model of the right structure (e.g. from 2 noisy ACs): give
+            // it a local optimisation too.
+            let promising = lo && e.wide_support > best_wide_support && e.wide_support > m;
+            best_wide_support = best_wide_support.max(e.wide_support);
+            if e.score <= to_beat && !promising {
                 continue;
             }
             let mut candidate = Scored {
                 model,
-                score,
-                inliers,
+                score: e.score,
+                inliers: e.inliers,
             };
-            if options.local_optimization && inliers > m {
+            if lo && e.wide_support > m {
                 lo_runs += 1;
                 candidate = local_optimization(
                     problem,
@@ -214,8 +238,10 @@ where
                     &mut lo_weights,
                 );
             }
-            bound = iterations_needed(candidate.inliers, n, m, options.confidence);
-            best = Some(candidate);
+            if candidate.score > to_beat {
+                bound = iterations_needed(candidate.inliers, n, m, options.confidence);
+                best = Some(candidate);
+            }
         }
     }
 
@@ -238,14 +264,14 @@ where
                 scoring.inlier_threshold_sq(),
                 FINAL_LM_ITERATIONS,
             )
-            && let Some((score, inliers)) =
-                score_model(problem, scoring, &refined, best.score, &mut buf)
-            && score > best.score
+            && let Some(e) =
+                score_model(problem, scoring, &refined, best.score, usize::MAX, &mut buf)
+            && e.score > best.score
         {
             best = Scored {
                 model: refined,
-                score,
-                inliers,
+                score: e.score,
+                inliers: e.inliers,
             };
             refinements = 1;
         }
@@ -266,6 +292,10 @@ where
 /// the true threshold (LO-RANSAC's iterative scheme, Lebeda et al., BMVC 2012). The wide first
 /// steps pull in true inliers that a noisy minimal model (e.g. from 2 ACs) misses.
 const LO_SCHEDULE: [f64; 5] = [8.0, 4.0, 2.0, 1.4, 1.0];
+
+/// A hypothesis whose support at this multiple of the threshold is the widest so far also gets a
+/// local optimisation, even if its score at the threshold is not the best.
+const LO_TRIGGER_SCALE: f64 = 3.0;
 
 /// Levenberg–Marquardt steps per refinement inside local optimisation: enough to leave a rough
 /// minimal model's basin (near-planar scenes make the cost a narrow valley), cheap enough to run
@@ -320,13 +350,13 @@ fn local_optimization<P: Problem, S: Scoring>(
         let linear = problem.fit_nonminimal(indices, Some(weights));
         let mut improved = false;
         for model in refined.into_iter().chain(linear) {
-            if let Some((score, inliers)) = score_model(problem, scoring, &model, best.score, buf)
-                && score > best.score
+            if let Some(e) = score_model(problem, scoring, &model, best.score, usize::MAX, buf)
+                && e.score > best.score
             {
                 best = Scored {
                     model,
-                    score,
-                    inliers,
+                    score: e.score,
+                    inliers: e.inliers,
                 };
                 improved = true;
             }

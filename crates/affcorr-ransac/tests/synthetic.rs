@@ -125,7 +125,7 @@ fn relative_pose_at_50_percent_outliers_points_and_acs() {
     let mut rng = Pcg64::seed_from_u64(12);
     for trial in 0..5 {
         let scene = PlaneScene::random(&mut rng);
-        let d = make_data(&mut rng, &scene, 5, 1000, 0.5, 0.5, 0.02);
+        let d = make_data(&mut rng, &scene, 3, 1000, 0.5, 0.5, 0.02);
         for kind in [SampleKind::Points, SampleKind::Affine] {
             let est =
                 estimate_relative_pose(&d.data, &scene.k1, &scene.k2, &options(1.5, kind, trial))
