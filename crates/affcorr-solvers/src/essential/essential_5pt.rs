@@ -118,6 +118,15 @@ pub(crate) fn solve_from_basis(basis: &[[f64; 9]; 4], out: &mut [Mat3]) -> usize
     }
     let mut roots = [0.0; poly::MAX_DEGREE];
     let nroots = poly::real_roots(&det, &mut roots);
+    // The constraints by monomial (column-major), for the lane-parallel residuals of `polish`.
+    let mut cols = [[0.0; 10]; 20];
+    if nroots > 0 {
+        for (r, row) in orig.iter().enumerate() {
+            for (m, &v) in row.iter().enumerate() {
+                cols[m][r] = v;
+            }
+        }
+    }
     let mut n = 0;
     for &z in &roots[..nroots] {
         let mut m = [[0.0; 3]; 3];
@@ -148,7 +157,7 @@ pub(crate) fn solve_from_basis(basis: &[[f64; 9]; 4], out: &mut [Mat3]) -> usize
             continue;
         }
         let (x, y) = (best[0] / best[2], best[1] / best[2]);
-        let (x, y, z) = polish(&orig, x, y, z);
+        let (x, y, z) = polish(&cols, x, y, z);
         if let Some(e) = unit(combine(basis, &[x, y, z, 1.0])) {
             out[n] = e;
             n += 1;
@@ -205,50 +214,42 @@ fn gauss_jordan(a: &mut [[f64; 20]; 10]) -> bool {
 /// system it squares the relative error); further steps (at most five) only while the last one
 /// was not already below 1e-9 of the variables' scale, since the error after a step of size δ
 /// is O(δ²). Monomials and their partial derivatives are written out in [`CUBIC`]'s order.
-fn polish(a: &[[f64; 20]; 10], mut x: f64, mut y: f64, mut z: f64) -> (f64, f64, f64) {
+fn polish(cols: &[[f64; 10]; 20], mut x: f64, mut y: f64, mut z: f64) -> (f64, f64, f64) {
     for _ in 0..6 {
         let (x2, y2, z2) = (x * x, y * y, z * z);
         let (xy, xz, yz) = (x * y, x * z, y * z);
+        // Residuals and Jacobian columns, all ten constraints at once: a combination of the
+        // coefficient columns weighted by the monomials (or their nonzero partial derivatives).
         #[rustfmt::skip]
-        let v = [
+        let r = combo(cols, cols[19], [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15, 16, 17, 18], [
             x2 * x, y2 * y, x2 * y, x * y2, x2 * z, x2, y2 * z, y2, xy * z, xy,
-            x * z2, xz, x, y * z2, yz, y, z2 * z, z2, z, 1.0,
-        ];
+            x * z2, xz, x, y * z2, yz, y, z2 * z, z2, z,
+        ]);
         #[rustfmt::skip]
-        let dx = [
-            3.0 * x2, 0.0, 2.0 * xy, y2, 2.0 * xz, 2.0 * x, 0.0, 0.0, yz, y,
-            z2, z, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-        ];
+        let j0 = combo(cols, cols[12], [0, 2, 3, 4, 5, 8, 9, 10, 11], [
+            3.0 * x2, 2.0 * xy, y2, 2.0 * xz, 2.0 * x, yz, y, z2, z,
+        ]);
         #[rustfmt::skip]
-        let dy = [
-            0.0, 3.0 * y2, x2, 2.0 * xy, 0.0, 0.0, 2.0 * yz, 2.0 * y, xz, x,
-            0.0, 0.0, 0.0, z2, z, 1.0, 0.0, 0.0, 0.0, 0.0,
-        ];
+        let j1 = combo(cols, cols[15], [1, 2, 3, 6, 7, 8, 9, 13, 14], [
+            3.0 * y2, x2, 2.0 * xy, 2.0 * yz, 2.0 * y, xz, x, z2, z,
+        ]);
         #[rustfmt::skip]
-        let dz = [
-            0.0, 0.0, 0.0, 0.0, x2, 0.0, y2, 0.0, xy, 0.0,
-            2.0 * xz, x, 0.0, 2.0 * yz, y, 0.0, 3.0 * z2, 2.0 * z, 1.0, 0.0,
-        ];
+        let j2 = combo(cols, cols[18], [4, 6, 8, 10, 11, 13, 14, 16, 17], [
+            x2, y2, xy, 2.0 * xz, x, 2.0 * yz, y, 3.0 * z2, 2.0 * z,
+        ]);
         // Normal equations JᵀJ s = Jᵀr (upper triangle of JᵀJ).
         let (mut h00, mut h01, mut h02, mut h11, mut h12, mut h22) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
         let (mut g0, mut g1, mut g2) = (0.0, 0.0, 0.0);
-        for row in a {
-            let (mut r, mut j0, mut j1, mut j2) = (0.0, 0.0, 0.0, 0.0);
-            for m in 0..20 {
-                r += row[m] * v[m];
-                j0 += row[m] * dx[m];
-                j1 += row[m] * dy[m];
-                j2 += row[m] * dz[m];
-            }
-            h00 += j0 * j0;
-            h01 += j0 * j1;
-            h02 += j0 * j2;
-            h11 += j1 * j1;
-            h12 += j1 * j2;
-            h22 += j2 * j2;
-            g0 += j0 * r;
-            g1 += j1 * r;
-            g2 += j2 * r;
+        for k in 0..10 {
+            h00 += j0[k] * j0[k];
+            h01 += j0[k] * j1[k];
+            h02 += j0[k] * j2[k];
+            h11 += j1[k] * j1[k];
+            h12 += j1[k] * j2[k];
+            h22 += j2[k] * j2[k];
+            g0 += j0[k] * r[k];
+            g1 += j1[k] * r[k];
+            g2 += j2[k] * r[k];
         }
         // Solve by the adjugate of the symmetric 3×3 matrix.
         let c00 = h11 * h22 - h12 * h12;
@@ -276,4 +277,22 @@ fn polish(a: &[[f64; 20]; 10], mut x: f64, mut y: f64, mut z: f64) -> (f64, f64,
         }
     }
     (x, y, z)
+}
+
+/// `init + Σ_t w[t]·cols[idx[t]]`, lane-parallel over the ten constraints.
+#[inline(always)]
+fn combo<const N: usize>(
+    cols: &[[f64; 10]; 20],
+    init: [f64; 10],
+    idx: [usize; N],
+    w: [f64; N],
+) -> [f64; 10] {
+    let mut acc = init;
+    for t in 0..N {
+        let c = &cols[idx[t]];
+        for k in 0..10 {
+            acc[k] += c[k] * w[t];
+        }
+    }
+    acc
 }
