@@ -9,6 +9,7 @@
 use crate::error::{RansacError, Result};
 use crate::options::RansacOptions;
 use crate::problem::Problem;
+use crate::refine::Loss;
 use crate::sampler::Sampler;
 use crate::score::Scoring;
 use rand::SeedableRng;
@@ -261,7 +262,11 @@ where
             && let Some(refined) = problem.refine(
                 &best.model,
                 &lo_indices,
-                scoring.inlier_threshold_sq(),
+                // MSAC's own cost (PoseLib's choice too): the refined model optimises what the
+                // score measures.
+                &Loss::Truncated {
+                    threshold_sq: scoring.inlier_threshold_sq(),
+                },
                 FINAL_LM_ITERATIONS,
             )
             && let Some(e) =
@@ -346,7 +351,14 @@ fn local_optimization<P: Problem, S: Scoring>(
         }
         thin_out(indices, weights, LO_MAX_FIT);
         let threshold_sq = scoring.inlier_threshold_sq() * scale * scale;
-        let refined = problem.refine(&best.model, indices, threshold_sq, LO_LM_ITERATIONS);
+        let refined = problem.refine(
+            &best.model,
+            indices,
+            &Loss::Cauchy {
+                scale_sq: threshold_sq,
+            },
+            LO_LM_ITERATIONS,
+        );
         let linear = problem.fit_nonminimal(indices, Some(weights));
         let mut improved = false;
         for model in refined.into_iter().chain(linear) {

@@ -4,6 +4,8 @@
 //! minimal and non-minimal solvers, its residual and its refinement. The engine never looks at
 //! the data itself: samplers, scoring and local optimisation vary independently of the problem.
 
+use crate::refine::Loss;
+
 /// A hypothesise-and-verify problem.
 pub trait Problem: Sync {
     /// The model type (e.g. a 3×3 matrix, a pose).
@@ -32,17 +34,17 @@ pub trait Problem: Sync {
     /// out.len()` under `model`.
     fn residuals(&self, model: &Self::Model, start: usize, out: &mut [f64]);
 
-    /// Polishes `model` on `inliers` by minimising a robust geometric error whose loss has scale
-    /// √`threshold_sq`, within `max_iterations` Levenberg–Marquardt steps; `None` to keep the
-    /// model as it is. The default does nothing.
+    /// Polishes `model` on `inliers` by minimising Σ `loss`(rᵢ²) of a geometric error within
+    /// `max_iterations` Levenberg–Marquardt steps; `None` to keep the model as it is. The
+    /// default does nothing.
     fn refine(
         &self,
         model: &Self::Model,
         inliers: &[usize],
-        threshold_sq: f64,
+        loss: &Loss,
         max_iterations: usize,
     ) -> Option<Self::Model> {
-        let _ = (model, inliers, threshold_sq, max_iterations);
+        let _ = (model, inliers, loss, max_iterations);
         None
     }
 }

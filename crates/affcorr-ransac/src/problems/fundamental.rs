@@ -145,25 +145,21 @@ impl Problem for FundamentalProblem<'_> {
         epipolar_residuals(self.data, f, self.affine_weight, start, out);
     }
 
-    /// Levenberg–Marquardt on the rank-2 manifold of the Sampson error with a Cauchy loss of
-    /// scale √`threshold_sq`.
+    /// Levenberg–Marquardt on the rank-2 manifold of the Sampson error.
     fn refine(
         &self,
         model: &Mat3,
         inliers: &[usize],
-        threshold_sq: f64,
+        loss: &Loss,
         max_iterations: usize,
     ) -> Option<Mat3> {
         let start = RankTwo::new(model)?;
-        let loss = Loss::Cauchy {
-            scale_sq: threshold_sq,
-        };
         Some(
             levenberg_marquardt(
                 self,
                 &start,
                 inliers,
-                &loss,
+                loss,
                 &LmOptions {
                     max_iterations,
                     ..Default::default()

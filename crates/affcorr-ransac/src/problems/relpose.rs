@@ -152,24 +152,20 @@ impl Problem for RelativePoseProblem<'_> {
         epipolar_residuals(self.pixels, &m.fundamental, self.affine_weight, start, out);
     }
 
-    /// Levenberg–Marquardt on the manifold (R, t ∈ S²) of the pixel Sampson error, with a
-    /// Cauchy loss of scale √`threshold_sq`.
+    /// Levenberg–Marquardt on the manifold (R, t ∈ S²) of the pixel Sampson error.
     fn refine(
         &self,
         model: &PoseModel,
         inliers: &[usize],
-        threshold_sq: f64,
+        loss: &Loss,
         max_iterations: usize,
     ) -> Option<PoseModel> {
-        let loss = Loss::Cauchy {
-            scale_sq: threshold_sq,
-        };
         Some(
             levenberg_marquardt(
                 self,
                 model,
                 inliers,
-                &loss,
+                loss,
                 &LmOptions {
                     max_iterations,
                     ..Default::default()
