@@ -184,27 +184,31 @@ fn gauss_jordan(a: &mut [[f64; 20]; 10]) -> bool {
             return false;
         }
         a.swap(col, p);
-        let inv = 1.0 / a[col][col];
-        let pivot_row = {
-            let row = &mut a[col];
-            for v in row[col..].iter_mut() {
-                *v *= inv;
-            }
-            *row
-        };
-        for (r, row) in a.iter_mut().enumerate() {
-            if r == col {
-                continue;
-            }
-            let f = row[col];
-            if f != 0.0 {
-                for c in col..20 {
-                    row[c] -= f * pivot_row[c];
-                }
-            }
+        // Only columns right of `col` are read again (the left block is known to become the
+        // identity), so the pivot row is scaled and eliminated from `col + 1` on, in place.
+        let (above, rest) = a.split_at_mut(col);
+        let (pivot, below) = rest.split_first_mut().expect("col < 10");
+        let inv = 1.0 / pivot[col];
+        for v in pivot[col + 1..].iter_mut() {
+            *v *= inv;
+        }
+        for row in above.iter_mut() {
+            eliminate(row, pivot, col);
+        }
+        for row in below.iter_mut() {
+            eliminate(row, pivot, col);
         }
     }
     true
+}
+
+/// `row −= row[col] · pivot` on the columns right of `col`.
+#[inline(always)]
+fn eliminate(row: &mut [f64; 20], pivot: &[f64; 20], col: usize) {
+    let f = row[col];
+    for c in col + 1..20 {
+        row[c] -= f * pivot[c];
+    }
 }
 
 /// Gauss–Newton on the ten cubic constraints A·m(x, y, z) = 0: restores full precision where
