@@ -177,7 +177,20 @@ pub(crate) fn solve_from_basis(basis: &[[f64; 9]; 4], out: &mut [Mat3]) -> usize
 /// Gauss–Jordan elimination of the left 10×10 block with partial pivoting, leaving it the
 /// identity. Returns `false` when a pivot vanishes (a degenerate configuration).
 fn gauss_jordan(a: &mut [[f64; 20]; 10]) -> bool {
-    let scale = a.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    // `if v > m` (not f64::max) vectorises; a NaN is caught by the finiteness test below or,
+    // failing that, by the pivot test.
+    let mut scale = 0.0f64;
+    let mut finite = true;
+    for row in a.iter() {
+        for &v in row {
+            let v = v.abs();
+            scale = if v > scale { v } else { scale };
+            finite &= v.is_finite();
+        }
+    }
+    if !finite {
+        return false;
+    }
     if !(scale.is_finite() && scale > 0.0) {
         return false;
     }
