@@ -241,6 +241,9 @@ where
             }
             if candidate.score > to_beat {
                 bound = iterations_needed(candidate.inliers, n, m, options.confidence);
+                // The best model's inliers bound its wide support from below: a raw hypothesis
+                // must out-support the optimised best, not just earlier raw ones, to earn an LO.
+                best_wide_support = best_wide_support.max(candidate.inliers);
                 best = Some(candidate);
             }
         }
@@ -305,7 +308,7 @@ const LO_TRIGGER_SCALE: f64 = 3.0;
 /// Levenberg–Marquardt steps per refinement inside local optimisation: enough to leave a rough
 /// minimal model's basin (near-planar scenes make the cost a narrow valley), cheap enough to run
 /// at every schedule step.
-const LO_LM_ITERATIONS: usize = 20;
+const LO_LM_ITERATIONS: usize = 5;
 /// Levenberg–Marquardt steps of the final refinement.
 const FINAL_LM_ITERATIONS: usize = 100;
 

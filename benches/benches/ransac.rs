@@ -1,0 +1,65 @@
+//! Robust estimation at N = 2000, 50% outliers (0.5 px, 2% affine noise), single thread:
+//! `cargo bench -p affcorr-benches --bench ransac`.
+
+use affcorr::geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
+use affcorr::ransac::{
+    Correspondences, EstimatorOptions, RansacOptions, SampleKind, estimate_fundamental,
+    estimate_homography, estimate_relative_pose,
+};
+use criterion::{Criterion, criterion_group, criterion_main};
+use rand::SeedableRng;
+
+fn data(planes: usize, seed: u64) -> (PlaneScene, Correspondences) {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    let scene = PlaneScene::random(&mut rng);
+    let noise = NoiseModel {
+        planes,
+        outlier_ratio: 0.5,
+        pixel_noise: 0.5,
+        affine_noise: 0.02,
+    };
+    let (acs, _) = noisy_correspondences(&mut rng, &scene, 2000, &noise);
+    let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
+    (scene, Correspondences::from_ac_rows(&rows).expect("finite"))
+}
+
+fn options(threshold: f64, sample: SampleKind) -> EstimatorOptions {
+    EstimatorOptions {
+        ransac: RansacOptions {
+            threshold,
+            ..Default::default()
+        },
+        sample: Some(sample),
+        ..Default::default()
+    }
+}
+
+fn bench(c: &mut Criterion) {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .expect("pool");
+    let mut g = c.benchmark_group("ransac_n2000_50pct");
+    g.sample_size(20);
+    let (_, h_data) = data(1, 1);
+    let (scene, e_data) = data(8, 2);
+    for (name, kind) in [("ac", SampleKind::Affine), ("points", SampleKind::Points)] {
+        g.bench_function(format!("homography_{name}"), |b| {
+            b.iter(|| pool.install(|| estimate_homography(&h_data, &options(2.0, kind))))
+        });
+        g.bench_function(format!("relative_pose_{name}"), |b| {
+            b.iter(|| {
+                pool.install(|| {
+                    estimate_relative_pose(&e_data, &scene.k1, &scene.k2, &options(1.5, kind))
+                })
+            })
+        });
+        g.bench_function(format!("fundamental_{name}"), |b| {
+            b.iter(|| pool.install(|| estimate_fundamental(&e_data, &options(1.5, kind))))
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
