@@ -21,9 +21,8 @@ writes benches/results/solver_noise_essential.csv and .png.
 import csv
 import pathlib
 
-import numpy as np
-
 import affcorr
+import numpy as np
 
 TRIALS = 300
 HERE = pathlib.Path(__file__).resolve().parent
@@ -41,7 +40,11 @@ def rotation(rng, max_angle):
 def intrinsics(rng):
     f = rng.uniform(500, 1000)
     return np.array(
-        [[f, 0, rng.uniform(300, 340)], [0, f * rng.uniform(0.8, 1.2), rng.uniform(220, 260)], [0, 0, 1.0]]
+        [
+            [f, 0, rng.uniform(300, 340)],
+            [0, f * rng.uniform(0.8, 1.2), rng.uniform(220, 260)],
+            [0, 0, 1.0],
+        ]
     )
 
 
@@ -102,16 +105,31 @@ def run_level(rng, px, aff):
     out = {name: [] for name in ("5pt", "2ac", "8pt")}
     for _ in range(TRIALS):
         R, t, K1, K2 = scene(rng)
-        norm = lambda c: affcorr.normalize_correspondences(c, K1, K2)
+
+        def norm(c, K1=K1, K2=K2):
+            return affcorr.normalize_correspondences(c, K1, K2)
+
         # 5pt: 5 points from 3 planes.
-        c = norm(perturb(rng, np.vstack([plane_acs(rng, R, t, K1, K2, k) for k in (2, 2, 1)]), px, aff))
-        out["5pt"].append(errors(affcorr.essential_5pt(c[:, :2], c[:, 2:4]), R, t, c[:, :2], c[:, 2:4]))
+        c = norm(
+            perturb(rng, np.vstack([plane_acs(rng, R, t, K1, K2, k) for k in (2, 2, 1)]), px, aff)
+        )
+        out["5pt"].append(
+            errors(affcorr.essential_5pt(c[:, :2], c[:, 2:4]), R, t, c[:, :2], c[:, 2:4])
+        )
         # 2ac: one AC from each of two planes.
-        c = norm(perturb(rng, np.vstack([plane_acs(rng, R, t, K1, K2, 1) for _ in range(2)]), px, aff))
+        c = norm(
+            perturb(rng, np.vstack([plane_acs(rng, R, t, K1, K2, 1) for _ in range(2)]), px, aff)
+        )
         out["2ac"].append(errors(affcorr.essential_2ac(c), R, t, c[:, :2], c[:, 2:4]))
         # 8pt: 50 points from 3 planes.
-        c = norm(perturb(rng, np.vstack([plane_acs(rng, R, t, K1, K2, k) for k in (17, 17, 16)]), px, aff))
-        out["8pt"].append(errors(affcorr.essential_8pt(c[:, :2], c[:, 2:4]), R, t, c[:, :2], c[:, 2:4]))
+        c = norm(
+            perturb(
+                rng, np.vstack([plane_acs(rng, R, t, K1, K2, k) for k in (17, 17, 16)]), px, aff
+            )
+        )
+        out["8pt"].append(
+            errors(affcorr.essential_8pt(c[:, :2], c[:, 2:4]), R, t, c[:, :2], c[:, 2:4])
+        )
     return {k: np.median(np.array(v), axis=0) for k, v in out.items()}
 
 
@@ -128,9 +146,29 @@ def main():
     path = OUT / "solver_noise_essential.csv"
     with open(path, "w", newline="") as f:
         w = csv.writer(f)
-        w.writerow(["sweep", "solver", "pixel_sigma_px", "affine_sigma", "median_rot_deg", "median_trans_deg", "median_E_err"])
+        w.writerow(
+            [
+                "sweep",
+                "solver",
+                "pixel_sigma_px",
+                "affine_sigma",
+                "median_rot_deg",
+                "median_trans_deg",
+                "median_E_err",
+            ]
+        )
         for r in rows:
-            w.writerow([r[0], r[1], f"{r[2]:.3f}", f"{r[3]:.3f}", f"{r[4]:.6g}", f"{r[5]:.6g}", f"{r[6]:.6g}"])
+            w.writerow(
+                [
+                    r[0],
+                    r[1],
+                    f"{r[2]:.3f}",
+                    f"{r[3]:.3f}",
+                    f"{r[4]:.6g}",
+                    f"{r[5]:.6g}",
+                    f"{r[6]:.6g}",
+                ]
+            )
 
     import matplotlib
 
@@ -138,12 +176,17 @@ def main():
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
-    for ax, sweep, col, label in ((axes[0], "pixel", 2, "pixel noise sigma [px]"), (axes[1], "affine", 3, "affine noise sigma [%]")):
+    for ax, sweep, col, label in (
+        (axes[0], "pixel", 2, "pixel noise sigma [px]"),
+        (axes[1], "affine", 3, "affine noise sigma [%]"),
+    ):
         for name, style in (("5pt", "o-"), ("2ac", "s-"), ("8pt", "^-")):
             sel = [r for r in rows if r[0] == sweep and r[1] == name]
             xs = [r[col] * (100 if sweep == "affine" else 1) for r in sel]
             ax.plot(xs, [r[4] for r in sel], style, label=f"{name} rotation")
-            ax.plot(xs, [r[5] for r in sel], style[0] + "--", alpha=0.5, label=f"{name} translation")
+            ax.plot(
+                xs, [r[5] for r in sel], style[0] + "--", alpha=0.5, label=f"{name} translation"
+            )
         ax.set_xlabel(label)
         ax.set_ylabel("median error [deg]")
         ax.set_title(f"{sweep} noise ({TRIALS} trials/level, best candidate)")

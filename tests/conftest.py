@@ -76,8 +76,11 @@ def random_scene(rng: np.random.Generator) -> PlaneScene:
     def k() -> np.ndarray:
         f = rng.uniform(500, 1000)
         return np.array(
-            [[f, 0, rng.uniform(300, 340)], [0, f * rng.uniform(0.8, 1.2), rng.uniform(220, 260)],
-             [0, 0, 1.0]]
+            [
+                [f, 0, rng.uniform(300, 340)],
+                [0, f * rng.uniform(0.8, 1.2), rng.uniform(220, 260)],
+                [0, 0, 1.0],
+            ]
         )
 
     R = rotation(rng.normal(size=3), rng.uniform(-0.45, 0.45))

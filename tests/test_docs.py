@@ -2,9 +2,8 @@
 
 import doctest
 
-import pytest
-
 import affcorr.solvers
+import pytest
 
 
 @pytest.mark.parametrize("module", [affcorr.solvers])

@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
+import affcorr
 import numpy as np
 import pytest
-
-import affcorr
 
 
 def rot2(theta):
@@ -25,7 +24,9 @@ def test_synthesize_matches_the_definition(rng):
     B[:, 0, 0], B[:, 1, 0], B[:, 1, 1] = 1 + x[:, 0], x[:, 1], 1 + x[:, 2]
     Ap = B / np.sqrt(np.linalg.det(B))[:, None, None]
     expected = s[:, None, None] * rot2(theta) @ Ap
-    np.testing.assert_allclose(affcorr.synthesize_affine(theta, s, x), expected, rtol=1e-13, atol=1e-13)
+    np.testing.assert_allclose(
+        affcorr.synthesize_affine(theta, s, x), expected, rtol=1e-13, atol=1e-13
+    )
 
 
 def test_decompose_inverts_synthesize(rng):
@@ -58,7 +59,10 @@ def test_batch_errors_name_the_first_bad_row():
 @pytest.mark.parametrize(
     ("args", "name"),
     [
-        (([0.0], [1.0], np.zeros((1, 2))), "residual_shape must have shape \\(N, 3\\), got \\(1, 2\\)"),
+        (
+            ([0.0], [1.0], np.zeros((1, 2))),
+            "residual_shape must have shape \\(N, 3\\), got \\(1, 2\\)",
+        ),
         (([[0.0]], [1.0], np.zeros((1, 3))), "orientation must have shape \\(N,\\)"),
         (([0.0], np.ones((1, 1, 1)), np.zeros((1, 3))), "scale must have shape"),
         ((["a"], [1.0], np.zeros((1, 3))), "orientation must be a numeric array"),
@@ -94,7 +98,9 @@ def test_empty_batches_give_empty_outputs():
 
 def test_homography_acs_match_independent_jacobians(scene, rng):
     x1 = scene.sample_pixels(rng, 100)
-    np.testing.assert_allclose(affcorr.affine_from_homography(scene.H, x1), scene.jacobians(x1), rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(
+        affcorr.affine_from_homography(scene.H, x1), scene.jacobians(x1), rtol=1e-10, atol=1e-12
+    )
     corrs = affcorr.correspondences_from_homography(scene.H, x1)
     np.testing.assert_allclose(corrs, scene.correspondences(x1), rtol=1e-10, atol=1e-10)
 
@@ -123,11 +129,15 @@ def test_normalisation_uses_both_intrinsics(scene, rng):
     np.testing.assert_allclose(out[:, :2], x1[:, :2], rtol=1e-12)
     np.testing.assert_allclose(out[:, 2:4], x2[:, :2], rtol=1e-12)
     A = corrs[:, 4:].reshape(-1, 2, 2)
-    np.testing.assert_allclose(out[:, 4:].reshape(-1, 2, 2), K2i[:2, :2] @ A @ scene.K1[:2, :2], rtol=1e-12)
+    np.testing.assert_allclose(
+        out[:, 4:].reshape(-1, 2, 2), K2i[:2, :2] @ A @ scene.K1[:2, :2], rtol=1e-12
+    )
     # Normalised ACs are those of the normalised homography R + t n^T / d: the plane-induced
     # ground truth that pins the convention.
     Hn = scene.R + np.outer(scene.t, scene.n) / scene.d
-    np.testing.assert_allclose(affcorr.correspondences_from_homography(Hn, out[:, :2]), out, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(
+        affcorr.correspondences_from_homography(Hn, out[:, :2]), out, rtol=1e-9, atol=1e-12
+    )
 
 
 @pytest.mark.parametrize(
@@ -135,7 +145,10 @@ def test_normalisation_uses_both_intrinsics(scene, rng):
     [
         (np.eye(2), "K2 must have shape \\(3, 3\\)"),
         (np.diag([0.0, 1.0, 1.0]), "K2 is not a valid intrinsic matrix: the focal lengths"),
-        (np.array([[1.0, 0, 0], [0.5, 1, 0], [0, 0, 1]]), "K2 is not a valid intrinsic matrix: it must be upper"),
+        (
+            np.array([[1.0, 0, 0], [0.5, 1, 0], [0, 0, 1]]),
+            "K2 is not a valid intrinsic matrix: it must be upper",
+        ),
         (np.diag([1.0, 1.0, 0.0]), "K2 is not a valid intrinsic matrix"),
         (np.full((3, 3), np.inf), "K2 is not a valid intrinsic matrix: it contains NaN"),
     ],
@@ -186,8 +199,16 @@ def test_epipolar_utilities_recover_the_pose(scene, rng):
     cands = affcorr.decompose_essential(E)
     assert len(cands) == 4
     t_unit = scene.t / np.linalg.norm(scene.t)
-    assert sum(np.allclose(R, scene.R, atol=1e-10) and np.allclose(t, t_unit, atol=1e-10) for R, t in cands) == 1
-    corrs = affcorr.normalize_correspondences(scene.correspondences(scene.sample_pixels(rng, 20)), scene.K1, scene.K2)
+    assert (
+        sum(
+            np.allclose(R, scene.R, atol=1e-10) and np.allclose(t, t_unit, atol=1e-10)
+            for R, t in cands
+        )
+        == 1
+    )
+    corrs = affcorr.normalize_correspondences(
+        scene.correspondences(scene.sample_pixels(rng, 20)), scene.K1, scene.K2
+    )
     R, t, n_front = affcorr.pose_from_essential(E, corrs[:, :2], corrs[:, 2:4])
     assert n_front == 20
     np.testing.assert_allclose(R, scene.R, atol=1e-10)

@@ -8,10 +8,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import affcorr
 import numpy as np
 import pytest
-
-import affcorr
 
 torch = pytest.importorskip("torch")
 kornia = pytest.importorskip("kornia")

@@ -45,15 +45,17 @@ def test_kernels_agree_with_the_torch_reference(rng):
     F, corrs, _ = perturbed(rng, 200)
     tol = {"rtol": 1e-10, "atol": 1e-12}
     torch.testing.assert_close(point_sampson(F, corrs), reference_point_sampson(F, corrs), **tol)
-    torch.testing.assert_close(point_sampson(F, corrs[:, :4]), reference_point_sampson(F, corrs),
-                               **tol)
+    torch.testing.assert_close(
+        point_sampson(F, corrs[:, :4]), reference_point_sampson(F, corrs), **tol
+    )
     sd = affine_sampson(F, corrs)
     assert sd.shape == (200, 2) and sd.dtype == torch.float64
     torch.testing.assert_close(sd, reference_affine_sampson(F, corrs), **tol)
     # The autograd Functions behind the functional forms.
     torch.testing.assert_close(AffineSampsonFunction.apply(F, corrs), sd, rtol=0, atol=0)
-    torch.testing.assert_close(PointSampsonFunction.apply(F, corrs), point_sampson(F, corrs),
-                               rtol=0, atol=0)
+    torch.testing.assert_close(
+        PointSampsonFunction.apply(F, corrs), point_sampson(F, corrs), rtol=0, atol=0
+    )
     # ... and with the numpy-facing bindings.
     np.testing.assert_array_equal(sd.numpy(), affcorr.sampson_affine(F.numpy(), corrs.numpy()))
 
@@ -173,8 +175,9 @@ def test_float32_inputs_and_grads_keep_their_dtype(rng):
     out = affine_sampson(F32, c32)
     assert out.dtype == torch.float32
     # Computed in float64 from the float32 values, rounded once at the end.
-    torch.testing.assert_close(out, affine_sampson(F32.double(), c32.double()).float(),
-                               rtol=0, atol=0)
+    torch.testing.assert_close(
+        out, affine_sampson(F32.double(), c32.double()).float(), rtol=0, atol=0
+    )
     out.sum().backward()
     assert F32.grad.dtype == torch.float32 and c32.grad.dtype == torch.float32
     assert F32.grad.shape == (3, 3) and c32.grad.shape == (10, 8)

@@ -106,8 +106,9 @@ def test_per_row_f_mixes_image_pairs(rng):
         affcorr.sampson_affine(Fs, corrs),
         np.vstack([affcorr.sampson_affine(F1, c1), affcorr.sampson_affine(F2, c2)]),
     )
-    np.testing.assert_allclose(affcorr.sampson_affine(Fs, corrs), np_sampson_affine(Fs, corrs),
-                               rtol=1e-10, atol=1e-12)
+    np.testing.assert_allclose(
+        affcorr.sampson_affine(Fs, corrs), np_sampson_affine(Fs, corrs), rtol=1e-10, atol=1e-12
+    )
     d, dc, dF = affcorr.sampson_affine_grad(Fs, corrs)
     d1, dc1, dF1 = affcorr.sampson_affine_grad(F1, c1)
     np.testing.assert_array_equal(d[:4], d1)
@@ -119,19 +120,30 @@ def test_large_batches_run_in_parallel_and_agree(rng, scene):
     # Above the rayon threshold (4096 rows).
     F, corrs = perturbed_acs(scene, rng, 200)
     big = np.tile(corrs, (30, 1))
-    np.testing.assert_array_equal(affcorr.sampson_point(F, big), np.tile(
-        affcorr.sampson_point(F, corrs), 30))
-    np.testing.assert_array_equal(affcorr.sampson_affine_grad(F, big)[1],
-                                  np.tile(affcorr.sampson_affine_grad(F, corrs)[1], (30, 1, 1)))
+    np.testing.assert_array_equal(
+        affcorr.sampson_point(F, big), np.tile(affcorr.sampson_point(F, corrs), 30)
+    )
+    np.testing.assert_array_equal(
+        affcorr.sampson_affine_grad(F, big)[1],
+        np.tile(affcorr.sampson_affine_grad(F, corrs)[1], (30, 1, 1)),
+    )
 
 
 def test_scale_of_f_does_not_matter(rng, scene):
     F, corrs = perturbed_acs(scene, rng, 50)
     for lam in (-2.0, 1e-3, 1e4):
-        np.testing.assert_allclose(affcorr.sampson_point(lam * F, corrs),
-                                   affcorr.sampson_point(F, corrs), rtol=1e-10, atol=1e-12)
-        np.testing.assert_allclose(affcorr.sampson_affine(lam * F, corrs),
-                                   affcorr.sampson_affine(F, corrs), rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(
+            affcorr.sampson_point(lam * F, corrs),
+            affcorr.sampson_point(F, corrs),
+            rtol=1e-10,
+            atol=1e-12,
+        )
+        np.testing.assert_allclose(
+            affcorr.sampson_affine(lam * F, corrs),
+            affcorr.sampson_affine(F, corrs),
+            rtol=1e-10,
+            atol=1e-12,
+        )
 
 
 def test_degenerate_denominators_give_zero_or_inf_not_nan():
@@ -206,6 +218,7 @@ def test_affine_gradients_match_finite_differences(rng, scene):
     # Row k depends on column k of A only.
     assert not dc[:, 0, [5, 7]].any() and not dc[:, 1, [4, 6]].any()
     for k in range(2):
+
         def row(Fs, c, k=k):
             return np_sampson_affine(Fs, c)[:, k]
 
@@ -231,39 +244,56 @@ def test_any_dtype_and_memory_order_is_converted(rng, scene):
     np.testing.assert_array_equal(affcorr.sampson_affine(np.asfortranarray(F), fortran), expected)
     np.testing.assert_array_equal(affcorr.sampson_affine(F, corrs.tolist()), expected)
     c32 = corrs.astype(np.float32)
-    np.testing.assert_array_equal(affcorr.sampson_affine(F, c32),
-                                  affcorr.sampson_affine(F, c32.astype(np.float64)))
+    np.testing.assert_array_equal(
+        affcorr.sampson_affine(F, c32), affcorr.sampson_affine(F, c32.astype(np.float64))
+    )
     ci = np.round(corrs).astype(np.int32)
-    np.testing.assert_array_equal(affcorr.sampson_point(F, ci),
-                                  affcorr.sampson_point(F, ci.astype(np.float64)))
+    np.testing.assert_array_equal(
+        affcorr.sampson_point(F, ci), affcorr.sampson_point(F, ci.astype(np.float64))
+    )
     # A strided view (every other row) is copied, not misread.
-    np.testing.assert_array_equal(affcorr.sampson_point(F, corrs[::2]),
-                                  affcorr.sampson_point(F, corrs)[::2])
+    np.testing.assert_array_equal(
+        affcorr.sampson_point(F, corrs[::2]), affcorr.sampson_point(F, corrs)[::2]
+    )
     assert affcorr.sampson_point(F, np.zeros((0, 4))).shape == (0,)
     assert affcorr.sampson_affine_grad(F, np.zeros((0, 8)))[1].shape == (0, 2, 8)
 
 
 @pytest.mark.parametrize(
-    "fun", [affcorr.sampson_point, affcorr.sampson_affine, affcorr.sampson_point_grad,
-            affcorr.sampson_affine_grad],
+    "fun",
+    [
+        affcorr.sampson_point,
+        affcorr.sampson_affine,
+        affcorr.sampson_point_grad,
+        affcorr.sampson_affine_grad,
+    ],
 )
 @pytest.mark.parametrize(
     ("F", "corrs", "match"),
     [
-        (np.eye(3), np.zeros((3, 7)),
-         r"corrs must have shape \(N, (4\) or \(N, )?8\), got \(3, 7\)"),
+        (
+            np.eye(3),
+            np.zeros((3, 7)),
+            r"corrs must have shape \(N, (4\) or \(N, )?8\), got \(3, 7\)",
+        ),
         (np.eye(3), np.zeros((2, 3, 8)), r"corrs must have shape .* got \(2, 3, 8\)"),
         (np.eye(3), np.zeros(8), r"corrs must have shape .* got \(8\)"),
         (np.eye(3), [["a"] * 8], "corrs must be a numeric array"),
         (np.eye(3), [[0, 0, 0, 0, 1, 0, 0, np.nan]] * 2, None),  # point: A unused
-        (np.eye(3), [[0, 0, 0, 0, 1, 0, 0, 1], [0, np.inf, 0, 0, 1, 0, 0, 1]],
-         r"corrs\[1\] contains NaN or infinity"),
+        (
+            np.eye(3),
+            [[0, 0, 0, 0, 1, 0, 0, 1], [0, np.inf, 0, 0, 1, 0, 0, 1]],
+            r"corrs\[1\] contains NaN or infinity",
+        ),
         (np.eye(4), np.zeros((2, 8)), r"F must have shape \(3, 3\) or \(N, 3, 3\), got \(4, 4\)"),
         (np.zeros((2, 9)), np.zeros((2, 8)), r"F must have shape .* got \(2, 9\)"),
         (np.full((3, 3), np.nan), np.zeros((2, 8)), "F contains NaN or infinity"),
         (np.zeros((3, 3, 3)), np.zeros((2, 8)), "F: expected 2 rows, got 3"),
-        (np.stack([np.eye(3), np.full((3, 3), np.inf)]), np.zeros((2, 8)),
-         r"F\[1\] contains NaN or infinity"),
+        (
+            np.stack([np.eye(3), np.full((3, 3), np.inf)]),
+            np.zeros((2, 8)),
+            r"F\[1\] contains NaN or infinity",
+        ),
     ],
 )
 def test_bad_inputs_raise_value_errors_naming_the_argument(fun, F, corrs, match):

@@ -1,9 +1,8 @@
 """Essential solvers through the bindings: ground truth built in numpy, bad inputs."""
 
+import affcorr
 import numpy as np
 import pytest
-
-import affcorr
 
 
 def rotation(rng, max_angle=0.5):
@@ -17,7 +16,11 @@ def rotation(rng, max_angle=0.5):
 def intrinsics(rng):
     f = rng.uniform(500, 1000)
     return np.array(
-        [[f, 0, rng.uniform(300, 340)], [0, f * rng.uniform(0.8, 1.2), rng.uniform(220, 260)], [0, 0, 1.0]]
+        [
+            [f, 0, rng.uniform(300, 340)],
+            [0, f * rng.uniform(0.8, 1.2), rng.uniform(220, 260)],
+            [0, 0, 1.0],
+        ]
     )
 
 
@@ -41,7 +44,10 @@ def points(rng, R, t, K1, K2, n):
     p1 = X @ K1.T
     p2 = X2 @ K2.T
     p1, p2 = p1[:, :2] / p1[:, 2:], p2[:, :2] / p2[:, 2:]
-    norm = lambda K, p: (np.c_[p, np.ones(len(p))] @ np.linalg.inv(K).T)[:, :2]
+
+    def norm(K, p):
+        return (np.c_[p, np.ones(len(p))] @ np.linalg.inv(K).T)[:, :2]
+
     return norm(K1, p1), norm(K2, p2)
 
 
@@ -117,7 +123,9 @@ def test_pose_from_solver_output():
     R, t, E, K1, K2 = scene(rng)
     x1, x2 = points(rng, R, t, K1, K2, 5)
     poses = [affcorr.pose_from_essential(M, x1, x2) for M in affcorr.essential_5pt(x1, x2)]
-    best = min(poses, key=lambda p: np.linalg.norm(p[0] - R) + np.linalg.norm(p[1] - t / np.linalg.norm(t)))
+    best = min(
+        poses, key=lambda p: np.linalg.norm(p[0] - R) + np.linalg.norm(p[1] - t / np.linalg.norm(t))
+    )
     assert np.linalg.norm(best[0] - R) < 1e-8 and best[2] == 5
 
 
@@ -149,8 +157,14 @@ def test_degenerate_samples_give_no_model():
         (lambda: affcorr.essential_8pt(np.zeros((7, 2)), np.zeros((7, 2))), "x1"),
         (lambda: affcorr.essential_8pt(np.zeros((9, 2)), np.zeros((8, 2))), "x1"),
         (lambda: affcorr.essential_8pt(np.zeros((9, 2)), np.full((9, 2), np.nan)), "x2"),
-        (lambda: affcorr.essential_lsq(np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((1, 8))), "corrs"),
-        (lambda: affcorr.essential_lsq(np.zeros((9, 2)), np.zeros((9, 2)), np.zeros((1, 7))), "corrs"),
+        (
+            lambda: affcorr.essential_lsq(np.zeros((2, 2)), np.zeros((2, 2)), np.zeros((1, 8))),
+            "corrs",
+        ),
+        (
+            lambda: affcorr.essential_lsq(np.zeros((9, 2)), np.zeros((9, 2)), np.zeros((1, 7))),
+            "corrs",
+        ),
         (lambda: affcorr.essential_5pt("abc", np.zeros((5, 2))), "x1"),
     ],
 )

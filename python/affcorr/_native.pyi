@@ -36,9 +36,12 @@ def affine_from_homography(H: ArrayLike, x1: ArrayLike) -> NDArray[np.float64]:
     """The affine maps A = dx2/dx1 (N, 2, 2) that H (3, 3) induces at the points x1 (N, 2)."""
 
 def correspondences_from_homography(H: ArrayLike, x1: ArrayLike) -> NDArray[np.float64]:
-    """The full ACs (N, 8) that H (3, 3) induces at the points x1 (N, 2): x2 = H(x1), A = dx2/dx1."""
+    """The full ACs (N, 8) that H (3, 3) induces at the points x1 (N, 2):
+    x2 = H(x1), A = dx2/dx1."""
 
-def normalize_correspondences(corrs: ArrayLike, K1: ArrayLike, K2: ArrayLike) -> NDArray[np.float64]:
+def normalize_correspondences(
+    corrs: ArrayLike, K1: ArrayLike, K2: ArrayLike
+) -> NDArray[np.float64]:
     """ACs (N, 8) in pixels to normalised coordinates: x1 -> K1^-1 x1, x2 -> K2^-1 x2,
     A -> K2[:2,:2]^-1 A K1[:2,:2]. K must be upper triangular with positive focal lengths."""
 
@@ -73,7 +76,8 @@ def pose_from_essential(
 
 def sampson_point(F: ArrayLike, corrs: ArrayLike) -> NDArray[np.float64]:
     """Point Sampson distance per row (N,) of corrs (N, 4) or (N, 8) (A columns ignored):
-    SD_P = (p2^T F p1)^2 / ((F p1)_1^2 + (F p1)_2^2 + (F^T p2)_1^2 + (F^T p2)_2^2), p = (x, y, 1)."""
+    SD_P = (p2^T F p1)^2 / ((F p1)_1^2 + (F p1)_2^2 + (F^T p2)_1^2 + (F^T p2)_2^2),
+    p = (x, y, 1)."""
 
 def sampson_affine(F: ArrayLike, corrs: ArrayLike) -> NDArray[np.float64]:
     """Affine Sampson distances (N, 2) of ACs (N, 8), one per row k of the affine epipolar
@@ -125,7 +129,8 @@ def fundamental_7pt(x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
     Up to 3 candidates, each of rank 2."""
 
 def fundamental_8pt(x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
-    """Normalised 8-point algorithm on N >= 8 point correspondences x1, x2 (N, 2); rank 2 enforced."""
+    """Normalised 8-point algorithm on N >= 8 point correspondences x1, x2 (N, 2);
+    rank 2 enforced."""
 
 def fundamental_3ac(corrs: ArrayLike) -> list[NDArray[np.float64]]:
     """F from 3 ACs (3, 8): 1 epipolar + 2 affine epipolar equations each (9 x 9, rank 8
@@ -195,7 +200,8 @@ def essential_5pt(x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
 def essential_2ac(corrs: ArrayLike) -> list[NDArray[np.float64]]:
     """Essential matrices from two affine correspondences (Barath & Hajder 2018).
 
-    corrs (2, 8) normalised ACs [x1, y1, x2, y2, a11, a12, a21, a22] (``normalize_correspondences``).
+    corrs (2, 8) normalised ACs [x1, y1, x2, y2, a11, a12, a21, a22]
+    (``normalize_correspondences``).
     Returns up to 10 unit-norm (3, 3) matrices, best first (ranked by the AC equation the
     minimal sub-problem drops); ACs of two planes give the true E first, ACs of one plane leave
     several solutions (the homography's two-fold ambiguity among them). Empty for det A <= 0 or

@@ -11,7 +11,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="affcorr", description="Affine correspondences.")
     sub = parser.add_subparsers(dest="command", required=True)
     demo = sub.add_parser("demo", help="geometry demo on graffiti 1→3 with its ground-truth H")
-    demo.add_argument("-o", "--out", type=Path, default=Path("affcorr_demo.png"), help="picture to write")
+    demo.add_argument(
+        "-o", "--out", type=Path, default=Path("affcorr_demo.png"), help="picture to write"
+    )
     demo.add_argument("--step", type=int, default=40, help="grid step in pixels")
     args = parser.parse_args(argv)
 

@@ -43,4 +43,8 @@ def read_gray(path: Path) -> np.ndarray:
 def graffiti() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(image 1, image 3, H 1→3) of the Oxford graffiti sequence."""
     d = data_dir() / "graffiti"
-    return read_gray(d / "graf1.png"), read_gray(d / "graf3.png"), read_opencv_matrix(d / "H1to3p.xml")
+    return (
+        read_gray(d / "graf1.png"),
+        read_gray(d / "graf3.png"),
+        read_opencv_matrix(d / "H1to3p.xml"),
+    )

@@ -39,7 +39,9 @@ def _bilinear(img: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.where(inside, v, np.nan)
 
 
-def patch_ncc(img1, img2, corrs: np.ndarray, A: np.ndarray, radius: float = PATCH_RADIUS) -> np.ndarray:
+def patch_ncc(
+    img1, img2, corrs: np.ndarray, A: np.ndarray, radius: float = PATCH_RADIUS
+) -> np.ndarray:
     """NCC between the disc of `radius` around x1 in img1 and its image x2 + A·u in img2."""
     g = np.linspace(-radius, radius, 15)
     u = np.stack(np.meshgrid(g, g), -1).reshape(-1, 2)
@@ -62,11 +64,18 @@ def run(out: Path | None = Path("affcorr_demo.png"), step: int = 40) -> dict:
 
     t0 = time.perf_counter()
     margin = 3 * PATCH_RADIUS
-    ys, xs = np.mgrid[margin : img1.shape[0] - margin : step, margin : img1.shape[1] - margin : step]
+    ys, xs = np.mgrid[
+        margin : img1.shape[0] - margin : step, margin : img1.shape[1] - margin : step
+    ]
     x1 = np.c_[xs.ravel(), ys.ravel()].astype(np.float64)
     corrs = affcorr.correspondences_from_homography(H, x1)
     h, w = img3.shape
-    keep = (corrs[:, 2] > margin) & (corrs[:, 3] > margin) & (corrs[:, 2] < w - margin) & (corrs[:, 3] < h - margin)
+    keep = (
+        (corrs[:, 2] > margin)
+        & (corrs[:, 3] > margin)
+        & (corrs[:, 2] < w - margin)
+        & (corrs[:, 3] < h - margin)
+    )
     corrs = corrs[keep]
     A = corrs[:, 4:].reshape(-1, 2, 2)
     theta, scale, shape = affcorr.decompose_affine(A)
@@ -127,10 +136,15 @@ def _draw(img1, img3, corrs, ncc, out: Path) -> None:
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(1, 2, figsize=(14, 6), constrained_layout=True)
-    circle = np.stack([np.cos(np.linspace(0, 2 * np.pi, 40)), np.sin(np.linspace(0, 2 * np.pi, 40))], 1)
+    circle = np.stack(
+        [np.cos(np.linspace(0, 2 * np.pi, 40)), np.sin(np.linspace(0, 2 * np.pi, 40))], 1
+    )
     r = PATCH_RADIUS
     cmap = plt.get_cmap("viridis")
-    for ax, img, title in ((axes[0], img1, "graf1: discs of radius 12 px"), (axes[1], img3, "graf3: the same discs mapped by A")):
+    for ax, img, title in (
+        (axes[0], img1, "graf1: discs of radius 12 px"),
+        (axes[1], img3, "graf3: the same discs mapped by A"),
+    ):
         ax.imshow(img, cmap="gray")
         ax.set_title(title)
         ax.set_axis_off()

@@ -5,19 +5,21 @@ Frobenius norm (sign arbitrary); a degenerate sample (collinear or repeated poin
 NaN) returns ``[]``. H and F solvers take pixels and normalise internally; essential solvers take
 normalised coordinates (see :func:`affcorr.normalize_correspondences`).
 
-| solver | sample | max models | method |
-|---|---|---|---|
-| ``homography_4pt(x1, x2)`` | 4 points | 1 | normalised DLT, closed-form null space |
-| ``homography_2ac(corrs)`` | 2 ACs | 1 | 2 point + 4 affine equations per AC, least squares |
-| ``homography_1ac_given_f(corrs, F)`` | 1 AC + F | 1 | H = -[e2]x F + e2 v^T (Barath & Hajder 2017) |
-| ``homography_lsq(x1, x2)`` / ``homography_ac_lsq(corrs)`` | N >= 4 / N >= 2 | 1 | least squares |
-| ``fundamental_7pt(x1, x2)`` | 7 points | 3 | det F = 0 cubic |
-| ``fundamental_8pt(x1, x2)`` | N >= 8 points | 1 | normalised 8-point, rank 2 enforced |
-| ``fundamental_3ac(corrs)`` | 3 ACs | 1 (3) | 9 linear equations + rank 2 |
-| ``fundamental_ac_lsq(corrs)`` | N >= 3 ACs | 1 | least squares + rank 2 |
-| ``essential_5pt(x1, x2)`` | 5 points | 10 | Nister / Stewenius, Sturm sequences |
-| ``essential_2ac(corrs)`` | 2 ACs | 10 | Barath & Hajder 2018 constraints, well-posed 5-equation subset |
-| ``essential_8pt(x1, x2)`` / ``essential_lsq(x1, x2, corrs)`` | N >= 8 | 1 | least squares, projected to the essential manifold |
+============================================  ===============  ====  =============================
+solver                                        sample           max   method
+============================================  ===============  ====  =============================
+``homography_4pt(x1, x2)``                    4 points         1     normalised DLT
+``homography_2ac(corrs)``                     2 ACs            1     6 equations per AC, LSQ
+``homography_1ac_given_f(corrs, F)``          1 AC + F         1     H = -[e2]x F + e2 v^T
+``homography_lsq`` / ``homography_ac_lsq``    N>=4 / N>=2      1     least squares
+``fundamental_7pt(x1, x2)``                   7 points         3     det F = 0 cubic
+``fundamental_8pt(x1, x2)``                   N >= 8 points    1     normalised 8-point, rank 2
+``fundamental_3ac(corrs)``                    3 ACs            3     9 equations + rank 2
+``fundamental_ac_lsq(corrs)``                 N >= 3 ACs       1     least squares + rank 2
+``essential_5pt(x1, x2)``                     5 points         10    Nister / Stewenius, Sturm
+``essential_2ac(corrs)``                      2 ACs            10    Barath & Hajder 2018
+``essential_8pt`` / ``essential_lsq``         N >= 8 rows      1     LSQ, essential projection
+============================================  ===============  ====  =============================
 
 Example:
 
