@@ -131,10 +131,7 @@ fn three_ac_with_two_on_one_plane_recovers_ground_truth() {
     assert!(ok as f64 >= 0.99 * TRIALS as f64, "{ok}");
 }
 
-fn gauss<R: Rng>(rng: &mut R) -> f64 {
-    let (u, v): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
-    (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-}
+use affcorr_geom::synthetic::gaussian as gauss;
 
 /// RMS point Sampson distance (pixels) of `f` on exact correspondences.
 fn sampson_rms(f: &Mat3, acs: &[AffineCorrespondence]) -> f64 {

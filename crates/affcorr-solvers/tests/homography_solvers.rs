@@ -4,7 +4,7 @@
 use affcorr_geom::synthetic::PlaneScene;
 use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2, Vec3};
 use affcorr_solvers::homography::*;
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_pcg::Pcg64;
 
 const TRIALS: usize = 1000;
@@ -119,11 +119,7 @@ fn transfer_error(h: &Mat3, acs: &[AffineCorrespondence]) -> f64 {
         / acs.len() as f64
 }
 
-fn gauss<R: Rng>(rng: &mut R) -> f64 {
-    // Box–Muller.
-    let (u, v): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
-    (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
-}
+use affcorr_geom::synthetic::gaussian as gauss;
 
 #[test]
 fn least_squares_with_noise_is_close() {
