@@ -1,28 +1,18 @@
 //! The essential solvers on exact synthetic data with K1 ≠ K2 and fx ≠ fy (normalised), on
 //! noisy data, and on degenerate samples.
 
+mod common;
 use affcorr_geom::camera::normalize_ac;
 use affcorr_geom::epipolar::Pose;
 use affcorr_geom::synthetic::{PlaneScene, random_pose, random_unit};
 use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2, Vec3};
 use affcorr_solvers::essential::*;
 use affcorr_solvers::relpose::*;
+use common::best_error;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
 const TRIALS: usize = 1000;
-
-/// Relative distance of the closest candidate to `truth`, up to scale and sign.
-fn best_error(cands: &[Mat3], truth: &Mat3) -> f64 {
-    let t = truth.normalize();
-    cands
-        .iter()
-        .map(|e| {
-            let e = e.normalize();
-            (e - t).norm().min((e + t).norm())
-        })
-        .fold(f64::INFINITY, f64::min)
-}
 
 /// `n` exact normalised ACs of a random plane scene.
 fn plane_acs(rng: &mut Pcg64, n: usize) -> (PlaneScene, Vec<AffineCorrespondence>) {

@@ -5,26 +5,17 @@
 //! is induced by its own random plane, seen by the same two cameras: each is an exact AC of that
 //! plane, and all share the scene's F.
 
+use affcorr_geom::sampson::sampson_point;
+mod common;
 use affcorr_geom::synthetic::{PlaneScene, random_unit, rotation_about};
-use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2, Vec3};
+use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec3};
 use affcorr_solvers::fundamental::*;
+use common::{best_error, perturb, points};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
 const TRIALS: usize = 1000;
 const TOL: f64 = 1e-8;
-
-fn rel_err(est: &Mat3, gt: &Mat3) -> f64 {
-    let (e, g) = (est / est.norm(), gt / gt.norm());
-    (e - g).norm().min((e + g).norm())
-}
-
-fn best(out: &[Mat3], n: usize, gt: &Mat3) -> f64 {
-    out[..n]
-        .iter()
-        .map(|f| rel_err(f, gt))
-        .fold(f64::INFINITY, f64::min)
-}
 
 /// `n` exact ACs, each on its own random plane (facing camera 1, tilted up to ~40°, at
 /// distance 3–6), all seen by the cameras of `scene`.
@@ -43,13 +34,6 @@ fn multi_plane_sample<R: Rng>(
         .collect()
 }
 
-fn points(acs: &[AffineCorrespondence]) -> (Vec<Vec2>, Vec<Vec2>) {
-    (
-        acs.iter().map(|a| a.x1).collect(),
-        acs.iter().map(|a| a.x2).collect(),
-    )
-}
-
 /// Success rate (best candidate within `TOL`) over `TRIALS` scenes; asserts ≥ 99 %. Also
 /// returns the mean number of models.
 fn success_rate(
@@ -65,7 +49,7 @@ fn success_rate(
         let acs = multi_plane_sample(&scene, &mut rng, n);
         let k = solve(&acs, &mut out);
         models += k;
-        if k > 0 && best(&out, k, &scene.fundamental()) < TOL {
+        if k > 0 && best_error(&out[..k], &scene.fundamental()) < TOL {
             ok += 1;
         }
     }
@@ -124,25 +108,16 @@ fn three_ac_with_two_on_one_plane_recovers_ground_truth() {
         let mut acs = scene.sample(&mut rng, 2);
         acs.extend(multi_plane_sample(&scene, &mut rng, 1));
         let n = fundamental_3ac(&acs, &mut out);
-        if n > 0 && best(&out, n, &scene.fundamental()) < TOL {
+        if n > 0 && best_error(&out[..n], &scene.fundamental()) < TOL {
             ok += 1;
         }
     }
     assert!(ok as f64 >= 0.99 * TRIALS as f64, "{ok}");
 }
 
-use affcorr_geom::synthetic::gaussian as gauss;
-
 /// RMS point Sampson distance (pixels) of `f` on exact correspondences.
 fn sampson_rms(f: &Mat3, acs: &[AffineCorrespondence]) -> f64 {
-    let s: f64 = acs
-        .iter()
-        .map(|ac| {
-            let (p1, p2) = (ac.x1.push(1.0), ac.x2.push(1.0));
-            let (l1, l2) = (f * p1, f.transpose() * p2);
-            p2.dot(&l1).powi(2) / (l1.xy().norm_squared() + l2.xy().norm_squared())
-        })
-        .sum();
+    let s: f64 = acs.iter().map(|ac| sampson_point(f, &ac.points())).sum();
     (s / acs.len() as f64).sqrt()
 }
 
@@ -153,16 +128,7 @@ fn non_minimal_with_noise_is_close() {
     for _ in 0..50 {
         let scene = PlaneScene::random(&mut rng);
         let exact = multi_plane_sample(&scene, &mut rng, 200);
-        let noisy: Vec<AffineCorrespondence> = exact
-            .iter()
-            .map(|ac| {
-                let mut n = *ac;
-                n.x1 += Vec2::new(gauss(&mut rng), gauss(&mut rng)) * 0.5;
-                n.x2 += Vec2::new(gauss(&mut rng), gauss(&mut rng)) * 0.5;
-                n.a += Mat2::from_fn(|_, _| gauss(&mut rng)) * 0.02 * ac.a.norm();
-                n
-            })
-            .collect();
+        let noisy = perturb(&mut rng, &exact, 0.5, 0.02);
         let (x1, x2) = points(&noisy);
         assert_eq!(fundamental_8pt(&x1, &x2, &mut out), 1);
         let e = sampson_rms(&out[0], &exact);

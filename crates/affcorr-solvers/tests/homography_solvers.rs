@@ -1,35 +1,16 @@
 //! Homography solvers on exact plane-induced data (K1 ≠ K2, fx ≠ fy), with noise, and on
 //! degenerate samples (issue #3).
 
+mod common;
 use affcorr_geom::synthetic::PlaneScene;
 use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2, Vec3};
 use affcorr_solvers::homography::*;
+use common::{best_error, perturb, points};
 use rand::SeedableRng;
 use rand_pcg::Pcg64;
 
 const TRIALS: usize = 1000;
 const TOL: f64 = 1e-8;
-
-/// ‖Ĥ − Ĥ_gt‖ for unit-Frobenius, sign-aligned matrices.
-fn rel_err(est: &Mat3, gt: &Mat3) -> f64 {
-    let (e, g) = (est / est.norm(), gt / gt.norm());
-    (e - g).norm().min((e + g).norm())
-}
-
-/// The smallest error among the models written.
-fn best(out: &[Mat3], n: usize, gt: &Mat3) -> f64 {
-    out[..n]
-        .iter()
-        .map(|h| rel_err(h, gt))
-        .fold(f64::INFINITY, f64::min)
-}
-
-fn points(acs: &[AffineCorrespondence]) -> (Vec<Vec2>, Vec<Vec2>) {
-    (
-        acs.iter().map(|a| a.x1).collect(),
-        acs.iter().map(|a| a.x2).collect(),
-    )
-}
 
 /// Runs `solve` on `TRIALS` random scenes with samples of `n` ACs; asserts a success rate
 /// ≥ 99 % and returns it.
@@ -45,7 +26,7 @@ fn success_rate(
         let scene = PlaneScene::random(&mut rng);
         let acs = scene.sample(&mut rng, n);
         let k = solve(&scene, &acs, &mut out);
-        if k > 0 && best(&out, k, &scene.homography()) < TOL {
+        if k > 0 && best_error(&out[..k], &scene.homography()) < TOL {
             ok += 1;
         }
     }
@@ -88,7 +69,7 @@ fn one_ac_given_f_is_scale_invariant_in_f() {
             homography_1ac_given_f(&acs, &(scene.fundamental() * s), &mut out),
             1
         );
-        assert!(rel_err(&out[0], &scene.homography()) < TOL);
+        assert!(best_error(&out[..1], &scene.homography()) < TOL);
     }
 }
 
@@ -119,8 +100,6 @@ fn transfer_error(h: &Mat3, acs: &[AffineCorrespondence]) -> f64 {
         / acs.len() as f64
 }
 
-use affcorr_geom::synthetic::gaussian as gauss;
-
 #[test]
 fn least_squares_with_noise_is_close() {
     let mut rng = Pcg64::seed_from_u64(7);
@@ -128,16 +107,7 @@ fn least_squares_with_noise_is_close() {
     for _ in 0..50 {
         let scene = PlaneScene::random(&mut rng);
         let exact = scene.sample(&mut rng, 200);
-        let noisy: Vec<AffineCorrespondence> = exact
-            .iter()
-            .map(|ac| {
-                let mut n = *ac;
-                n.x1 += Vec2::new(gauss(&mut rng), gauss(&mut rng)) * 0.5;
-                n.x2 += Vec2::new(gauss(&mut rng), gauss(&mut rng)) * 0.5;
-                n.a += Mat2::from_fn(|_, _| gauss(&mut rng)) * 0.02 * ac.a.norm();
-                n
-            })
-            .collect();
+        let noisy = perturb(&mut rng, &exact, 0.5, 0.02);
         let (x1, x2) = points(&noisy);
         assert_eq!(homography_lsq(&x1, &x2, &mut out), 1);
         let e = transfer_error(&out[0], &exact);
