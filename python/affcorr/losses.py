@@ -76,18 +76,23 @@ def _grad_corrs(ctx, g: torch.Tensor) -> torch.Tensor:
     return g.to(device=device, dtype=dtype)
 
 
+def _forward(ctx, F, corrs, value, value_and_grad):  # noqa: N803
+    """Runs the Rust kernel, with its gradients only when autograd needs them."""
+    f, c = _to_numpy(F), _to_numpy(corrs)
+    out = {"device": corrs.device, "dtype": _out_dtype(F, corrs)}
+    if not any(ctx.needs_input_grad):
+        return torch.from_numpy(value(f, c)).to(**out)
+    dist, d_corrs, d_f = value_and_grad(f, c)
+    _save(ctx, F, corrs, d_corrs, d_f)
+    return torch.from_numpy(dist).to(**out)
+
+
 class PointSampsonFunction(torch.autograd.Function):
     """``apply(F, corrs) -> (N,)``: SD_P with the Rust kernel's analytic gradients."""
 
     @staticmethod
     def forward(ctx, F, corrs):  # noqa: N803 (F is the fundamental matrix)
-        f, c = _to_numpy(F), _to_numpy(corrs)
-        out = {"device": corrs.device, "dtype": _out_dtype(F, corrs)}
-        if not any(ctx.needs_input_grad):
-            return torch.from_numpy(_native.sampson_point(f, c)).to(**out)
-        dist, d_corrs, d_f = _native.sampson_point_grad(f, c)
-        _save(ctx, F, corrs, d_corrs, d_f)
-        return torch.from_numpy(dist).to(**out)
+        return _forward(ctx, F, corrs, _native.sampson_point, _native.sampson_point_grad)
 
     @staticmethod
     @once_differentiable
@@ -106,13 +111,7 @@ class AffineSampsonFunction(torch.autograd.Function):
 
     @staticmethod
     def forward(ctx, F, corrs):  # noqa: N803
-        f, c = _to_numpy(F), _to_numpy(corrs)
-        out = {"device": corrs.device, "dtype": _out_dtype(F, corrs)}
-        if not any(ctx.needs_input_grad):
-            return torch.from_numpy(_native.sampson_affine(f, c)).to(**out)
-        dist, d_corrs, d_f = _native.sampson_affine_grad(f, c)
-        _save(ctx, F, corrs, d_corrs, d_f)
-        return torch.from_numpy(dist).to(**out)
+        return _forward(ctx, F, corrs, _native.sampson_affine, _native.sampson_affine_grad)
 
     @staticmethod
     @once_differentiable
