@@ -66,24 +66,17 @@ fn score_model<P: Problem, S: Scoring>(
     let thr = scoring.inlier_threshold_sq();
     let wide_thr = thr * LO_TRIGGER_SCALE * LO_TRIGGER_SCALE;
     let (mut score, mut inliers, mut wide_support) = (0.0, 0usize, 0usize);
-    let mut start = 0;
-    while start < n {
-        let len = BLOCK.min(n - start);
-        let block = &mut buf[..len];
-        problem.residuals(model, start, block);
-        for &r2 in block.iter() {
+    let complete = for_each_block(problem, model, buf, |start, block| {
+        for &r2 in block {
             score += scoring.quality(r2);
             inliers += usize::from(r2 < thr);
             wide_support += usize::from(r2 < wide_thr);
         }
-        start += len;
         // Even if every remaining datum were perfect, could it still win on either count?
-        let rest = n - start;
-        if score + rest as f64 <= to_beat && wide_support + rest <= wide_to_beat {
-            return None;
-        }
-    }
-    Some(Evaluation {
+        let rest = n - start - block.len();
+        score + rest as f64 > to_beat || wide_support + rest > wide_to_beat
+    });
+    complete.then_some(Evaluation {
         score,
         inliers,
         wide_support,
@@ -104,19 +97,37 @@ fn collect_inliers<P: Problem, S: Scoring>(
     indices.clear();
     weights.clear();
     let thr = scoring.inlier_threshold_sq() * scale * scale;
-    let n = problem.len();
-    let mut start = 0;
-    while start < n {
-        let len = BLOCK.min(n - start);
-        problem.residuals(model, start, &mut buf[..len]);
-        for (k, &r2) in buf[..len].iter().enumerate() {
+    for_each_block(problem, model, buf, |start, block| {
+        for (k, &r2) in block.iter().enumerate() {
             if r2 < thr {
                 indices.push(start + k);
                 weights.push(if scale > 1.0 { 1.0 } else { scoring.weight(r2) });
             }
         }
+        true
+    });
+}
+
+/// Computes the squared residuals of all data block by block into `buf` and hands each block
+/// (with its first index) to `visit`, which returns false to stop early. Returns whether every
+/// block was visited.
+fn for_each_block<P: Problem>(
+    problem: &P,
+    model: &P::Model,
+    buf: &mut [f64],
+    mut visit: impl FnMut(usize, &[f64]) -> bool,
+) -> bool {
+    let n = problem.len();
+    let mut start = 0;
+    while start < n {
+        let len = BLOCK.min(n - start);
+        problem.residuals(model, start, &mut buf[..len]);
+        if !visit(start, &buf[..len]) {
+            return false;
+        }
         start += len;
     }
+    true
 }
 
 /// Adaptive bound on the number of iterations for `inliers` of `n` at `confidence`.
@@ -390,16 +401,12 @@ fn inlier_mask<P: Problem, S: Scoring>(
     model: &P::Model,
     buf: &mut [f64],
 ) -> Vec<bool> {
-    let n = problem.len();
     let thr = scoring.inlier_threshold_sq();
-    let mut mask = Vec::with_capacity(n);
-    let mut start = 0;
-    while start < n {
-        let len = BLOCK.min(n - start);
-        problem.residuals(model, start, &mut buf[..len]);
-        mask.extend(buf[..len].iter().map(|&r2| r2 < thr));
-        start += len;
-    }
+    let mut mask = Vec::with_capacity(problem.len());
+    for_each_block(problem, model, buf, |_, block| {
+        mask.extend(block.iter().map(|&r2| r2 < thr));
+        true
+    });
     mask
 }
 
