@@ -28,4 +28,6 @@ pip_install ".[test,plot]"
 if [ "${AFFCORR_WITH_TORCH:-0}" = 1 ]; then
     # --no-deps: kornia's torch requirement is met by Debian's torch; pip must not fetch PyPI's.
     pip_install --no-deps "kornia==0.7.4" "kornia-rs>=0.1,<0.2"
+    # The training extras without torch itself (pyproject's [train]): ONNX export and data.
+    pip_install "onnx>=1.14" "scikit-image>=0.22" "tqdm>=4"
 fi
