@@ -4,6 +4,12 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 AFFCORR_WITH_TORCH=1 bash scripts/setup.sh
 echo "== cargo test"
+# The runner's tests load ONNX Runtime at run time: the library of the onnxruntime wheel.
+if [ -z "${ORT_DYLIB_PATH:-}" ]; then
+    ORT_DYLIB_PATH=$(.venv/bin/python -c 'import affcorr.shape as s; print(s.find_ort_library())')
+    export ORT_DYLIB_PATH
+fi
+echo "ORT_DYLIB_PATH=$ORT_DYLIB_PATH"
 # The default members: everything but the extension module, which pytest covers.
 cargo test --locked
 echo "== pytest"

@@ -5,6 +5,7 @@
 //! - [`geom`]: synthesis, decomposition, homography ACs, normalisation, LAFs, epipolar utilities.
 //! - [`sampson`]: Sampson distances and their gradients.
 //! - [`solvers`]: minimal and non-minimal solvers.
+//! - [`runner`]: the shape network, patch extraction and image decoding (ONNX Runtime).
 //!
 //! Every function validates its inputs here or in Rust and raises `ValueError` naming the bad
 //! argument; no Rust panic can cross this boundary because the core crates return `Result`s.
@@ -15,6 +16,7 @@ use pyo3::prelude::*;
 mod arrays;
 mod geom;
 mod ransac;
+mod runner;
 mod sampson;
 mod solvers;
 
@@ -23,6 +25,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     geom::register(m)?;
     ransac::register(m)?;
+    runner::register(m)?;
     sampson::register(m)?;
     solvers::register(m)?;
     Ok(())

@@ -9,6 +9,9 @@ map ``A = dx2/dx1`` between the two images. Conventions (see DESIGN.md §2):
 - angles are radians.
 
 Every function raises ``ValueError`` naming the bad argument.
+
+``ShapeEstimator`` runs the shape network (ONNX Runtime, from the ``onnxruntime`` wheel) to turn
+two images and matched points into ACs.
 """
 
 from ._native import (
@@ -53,6 +56,7 @@ from .estimation import (
     estimate_relative_pose,
     estimate_relative_pose_batch,
 )
+from .shape import ShapeEstimate, ShapeEstimator, extract_patches, read_gray_image
 
 __all__ = [
     "__version__",
@@ -65,6 +69,10 @@ __all__ = [
     "estimate_homography_batch",
     "estimate_relative_pose",
     "estimate_relative_pose_batch",
+    "ShapeEstimate",
+    "ShapeEstimator",
+    "extract_patches",
+    "read_gray_image",
     "affine_from_homography",
     "affine_to_laf",
     "correspondences_from_homography",

@@ -6,6 +6,7 @@ ACs are ``(N, 8)`` rows ``[x1, y1, x2, y2, a11, a12, a21, a22]`` with ``A = dx2/
 Bad inputs raise ``ValueError`` naming the argument.
 """
 
+import os
 from collections.abc import Sequence
 from typing import Any
 
@@ -217,3 +218,68 @@ def essential_lsq(
 ) -> list[NDArray[np.float64]]:
     """Like essential_8pt with the three equations of each normalised AC in corrs (M, 8) stacked
     under the point rows; needs N + 3M >= 8. x1, x2 may have zero rows."""
+
+# --- shape network runner (DESIGN.md §6; wrapped by affcorr.shape) ----------------------------
+
+class ShapeRunner:
+    """The shape network loaded through ONNX Runtime (use ``affcorr.ShapeEstimator``).
+
+    model_path: ``.onnx`` with the ``shape-v1`` contract (checked on loading: inputs patch_a,
+    patch_b; outputs angle_logits_a/b, scale_logits_a/b, residual_shape; metadata
+    affcorr.contract, patch_size, angle_bins, scale_bins, decode). ort_library: the
+    libonnxruntime to load (``None``: ``ORT_DYLIB_PATH``); ignored once ONNX Runtime is loaded.
+    Raises FileNotFoundError (no such model), RuntimeError (ONNX Runtime or the model),
+    ValueError (threads < 1, batch_size < 1)."""
+
+    def __init__(
+        self,
+        model_path: str | os.PathLike[str],
+        *,
+        ort_library: str | os.PathLike[str] | None = None,
+        threads: int | None = None,
+        batch_size: int = 512,
+    ) -> None: ...
+    def predict(
+        self, patches_a: ArrayLike, patches_b: ArrayLike, return_logits: bool = False
+    ) -> dict[str, np.ndarray]:
+        """patches (N, 1, 32, 32) -> orientation_a/b, scale_a/b (N,), residual_shape (N, 3);
+        with return_logits also the float32 outputs angle_logits_a/b, scale_logits_a/b and
+        residual_shape_raw."""
+    def estimate(
+        self, image_a: Any, image_b: Any, x1: ArrayLike, x2: ArrayLike
+    ) -> tuple[
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+        NDArray[np.float64],
+    ]:
+        """Images (path or array) and matches x1, x2 (N, 2) -> (corrs (N, 8), orientation_a,
+        orientation_b, scale_a, scale_b (N,), residual_shape (N, 3)), with
+        A = (S_B / S_A) R(O_B - O_A) A'(A'')."""
+    @property
+    def angle_bins(self) -> NDArray[np.float64]: ...
+    @property
+    def scale_bins(self) -> NDArray[np.float64]: ...
+    @property
+    def metadata(self) -> dict[str, str]: ...
+    @property
+    def threads(self) -> int: ...
+    @property
+    def batch_size(self) -> int: ...
+
+def init_ort(path: str | os.PathLike[str] | None = None) -> str:
+    """Loads ONNX Runtime from path (else ``ORT_DYLIB_PATH``) and returns the library in use;
+    a no-op once loaded. RuntimeError when the library is missing or unusable (< 1.20)."""
+
+def ort_library() -> str | None:
+    """The loaded ONNX Runtime library, or None."""
+
+def extract_patches(image: Any, xy: ArrayLike) -> NDArray[np.float32]:
+    """Patches (N, 1, 32, 32) float32: pixel (r, c) is the gray image read bilinearly at
+    (x + c - 15.5, y + r - 15.5), edges replicated. image: PNG/JPEG path or array (H, W) /
+    (H, W, C) of uint8, uint16 or float in [0, 1]."""
+
+def read_gray_image(image: Any) -> NDArray[np.float32]:
+    """(H, W) float32 gray in [0, 1]; colour is 0.299 R + 0.587 G + 0.114 B, alpha ignored."""

@@ -4,7 +4,8 @@
 //! - [`geom`]: conventions, AC synthesis/decomposition, Sampson distances, epipolar utilities.
 //! - [`solvers`]: minimal and non-minimal solvers.
 //! - [`ransac`]: robust estimation of H, F and relative pose from points or ACs.
-//! - [`runner`]: ONNX networks (issues #5, #6, not yet implemented).
+//! - [`runner`]: ONNX Runtime runner: image decoding, 32×32 patch extraction and the shape
+//!   network (images + matches → ACs `A = S_AB·R(O_AB)·A′(A″)`); the matchers are not yet in it.
 //!
 //! ```
 //! use affcorr::geom::{affine::{AffineShape, synthesize, decompose}};

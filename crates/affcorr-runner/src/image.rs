@@ -1,0 +1,245 @@
+//! Images as the networks see them: grayscale `f32` in [0, 1], row-major H×W (DESIGN.md §2).
+//!
+//! - Decoding (PNG, JPEG) through the `image` crate; 8-bit samples are divided by 255 and
+//!   16-bit samples by 65535, float samples are taken as they are.
+//! - Colour to gray: luma = 0.299 R + 0.587 G + 0.114 B (ITU-R BT.601, as OpenCV and PIL).
+//!   Alpha is ignored (not premultiplied, not composited).
+//! - Unreadable, truncated or corrupt files (including JPEGs cut short, which the decoder
+//!   itself would fill with grey) are [`RunnerError::ImageOpen`] /
+//!   [`RunnerError::ImageDecode`]; bad raw buffers are [`RunnerError::ImageBuffer`].
+
+use std::io::Cursor;
+use std::path::Path;
+
+use image::{DynamicImage, ImageReader};
+
+use crate::error::{Result, RunnerError};
+
+/// The BT.601 luma weights of R, G and B.
+pub const LUMA_WEIGHTS: [f32; 3] = [0.299, 0.587, 0.114];
+
+/// A grayscale image: `data[y * width + x]` is the value of the pixel centred at (x, y).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GrayImage {
+    width: usize,
+    height: usize,
+    data: Vec<f32>,
+}
+
+/// Borrowed interleaved pixel samples for [`GrayImage::from_raw`].
+#[derive(Debug, Clone, Copy)]
+pub enum PixelData<'a> {
+    /// 8-bit samples, divided by 255.
+    U8(&'a [u8]),
+    /// 16-bit samples, divided by 65535.
+    U16(&'a [u16]),
+    /// Float samples, expected in [0, 1], used as they are (must be finite).
+    F32(&'a [f32]),
+}
+
+impl PixelData<'_> {
+    fn len(&self) -> usize {
+        match self {
+            Self::U8(d) => d.len(),
+            Self::U16(d) => d.len(),
+            Self::F32(d) => d.len(),
+        }
+    }
+}
+
+impl GrayImage {
+    /// An image from row-major gray values (`data.len() == width * height`, both > 0, all
+    /// finite).
+    pub fn new(width: usize, height: usize, data: Vec<f32>) -> Result<Self> {
+        check_size(width, height, 1, data.len())?;
+        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+            return Err(non_finite_pixel(i, width));
+        }
+        Ok(Self {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// An image from interleaved samples with `channels` per pixel: 1 gray, 2 gray + alpha,
+    /// 3 RGB, 4 RGBA.
+    ///
+    /// ```
+    /// use affcorr_runner::{GrayImage, PixelData};
+    /// // One white and one pure-red RGB pixel.
+    /// let img = GrayImage::from_raw(2, 1, 3, PixelData::U8(&[255, 255, 255, 255, 0, 0])).unwrap();
+    /// assert!((img.get(0, 0) - 1.0).abs() < 1e-6 && (img.get(1, 0) - 0.299).abs() < 1e-6);
+    /// ```
+    pub fn from_raw(
+        width: usize,
+        height: usize,
+        channels: usize,
+        pixels: PixelData<'_>,
+    ) -> Result<Self> {
+        if !(1..=4).contains(&channels) {
+            return Err(RunnerError::ImageBuffer {
+                reason: format!(
+                    "{channels} channels per pixel; expected 1 (gray), 2 (gray + alpha), 3 (RGB) \
+                     or 4 (RGBA)"
+                ),
+            });
+        }
+        check_size(width, height, channels, pixels.len())?;
+        let data = match pixels {
+            PixelData::U8(d) => to_gray(d, channels, |v| f32::from(v) / 255.0),
+            PixelData::U16(d) => to_gray(d, channels, |v| f32::from(v) / 65535.0),
+            PixelData::F32(d) => {
+                if let Some(i) = d.iter().position(|v| !v.is_finite()) {
+                    return Err(non_finite_pixel(i / channels, width));
+                }
+                to_gray(d, channels, |v| v)
+            }
+        };
+        Ok(Self {
+            width,
+            height,
+            data,
+        })
+    }
+
+    /// Reads and decodes an image file (PNG or JPEG, recognised by content).
+    pub fn open(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|e| RunnerError::ImageOpen {
+            path: path.to_path_buf(),
+            reason: e.to_string(),
+        })?;
+        decode(&bytes, &format!("`{}`", path.display()))
+    }
+
+    /// Decodes an encoded image (PNG or JPEG) held in memory.
+    pub fn decode(bytes: &[u8]) -> Result<Self> {
+        decode(bytes, "from memory")
+    }
+
+    /// Width in pixels.
+    pub fn width(&self) -> usize {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> usize {
+        self.height
+    }
+
+    /// The row-major values, `height * width` of them.
+    pub fn data(&self) -> &[f32] {
+        &self.data
+    }
+
+    /// The value of pixel (x, y); panics when out of range.
+    pub fn get(&self, x: usize, y: usize) -> f32 {
+        assert!(
+            x < self.width && y < self.height,
+            "pixel ({x}, {y}) out of range"
+        );
+        self.data[y * self.width + x]
+    }
+
+    /// The values, consuming the image.
+    pub fn into_data(self) -> Vec<f32> {
+        self.data
+    }
+}
+
+fn check_size(width: usize, height: usize, channels: usize, len: usize) -> Result<()> {
+    if width == 0 || height == 0 {
+        return Err(RunnerError::ImageBuffer {
+            reason: format!("the image is empty ({width}×{height})"),
+        });
+    }
+    let expected = width
+        .checked_mul(height)
+        .and_then(|n| n.checked_mul(channels))
+        .ok_or_else(|| RunnerError::ImageBuffer {
+            reason: format!("{width}×{height}×{channels} overflows"),
+        })?;
+    if len != expected {
+        return Err(RunnerError::ImageBuffer {
+            reason: format!(
+                "{len} samples for a {width}×{height} image with {channels} channel(s); expected \
+                 {expected}"
+            ),
+        });
+    }
+    Ok(())
+}
+
+fn non_finite_pixel(i: usize, width: usize) -> RunnerError {
+    RunnerError::ImageBuffer {
+        reason: format!(
+            "pixel (x = {}, y = {}) is NaN or infinite",
+            i % width,
+            i / width
+        ),
+    }
+}
+
+/// Interleaved samples to gray: the value itself (1–2 channels) or the BT.601 luma (3–4).
+fn to_gray<T: Copy>(samples: &[T], channels: usize, scale: impl Fn(T) -> f32) -> Vec<f32> {
+    let [wr, wg, wb] = LUMA_WEIGHTS;
+    match channels {
+        1 => samples.iter().map(|&v| scale(v)).collect(),
+        2 => samples.chunks_exact(2).map(|p| scale(p[0])).collect(),
+        _ => samples
+            .chunks_exact(channels)
+            .map(|p| wr * scale(p[0]) + wg * scale(p[1]) + wb * scale(p[2]))
+            .collect(),
+    }
+}
+
+/// Whether a JPEG stream has an EOI marker (FF D9) after its last SOS marker (FF DA).
+fn jpeg_complete(bytes: &[u8]) -> bool {
+    let last_sos = bytes.windows(2).rposition(|w| w == [0xFF, 0xDA]);
+    let last_eoi = bytes.windows(2).rposition(|w| w == [0xFF, 0xD9]);
+    matches!((last_sos, last_eoi), (Some(s), Some(e)) if e > s)
+}
+
+fn decode(bytes: &[u8], source_name: &str) -> Result<GrayImage> {
+    let decode_error = |reason: String| RunnerError::ImageDecode {
+        source_name: source_name.to_string(),
+        reason,
+    };
+    let reader = ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| decode_error(e.to_string()))?;
+    if reader.format().is_none() {
+        return Err(decode_error(
+            "unrecognised format (PNG and JPEG are supported)".to_string(),
+        ));
+    }
+    // The JPEG decoder fills a truncated scan with grey instead of failing; a complete file has
+    // an end-of-image marker after its last start-of-scan (scan data never contains FF D9).
+    if reader.format() == Some(image::ImageFormat::Jpeg) && !jpeg_complete(bytes) {
+        return Err(decode_error(
+            "truncated JPEG (no end-of-image marker after the last scan)".to_string(),
+        ));
+    }
+    let img = reader.decode().map_err(|e| decode_error(e.to_string()))?;
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    let (channels, pixels) = match &img {
+        DynamicImage::ImageLuma8(b) => (1, PixelData::U8(b.as_raw())),
+        DynamicImage::ImageLumaA8(b) => (2, PixelData::U8(b.as_raw())),
+        DynamicImage::ImageRgb8(b) => (3, PixelData::U8(b.as_raw())),
+        DynamicImage::ImageRgba8(b) => (4, PixelData::U8(b.as_raw())),
+        DynamicImage::ImageLuma16(b) => (1, PixelData::U16(b.as_raw())),
+        DynamicImage::ImageLumaA16(b) => (2, PixelData::U16(b.as_raw())),
+        DynamicImage::ImageRgb16(b) => (3, PixelData::U16(b.as_raw())),
+        DynamicImage::ImageRgba16(b) => (4, PixelData::U16(b.as_raw())),
+        DynamicImage::ImageRgb32F(b) => (3, PixelData::F32(b.as_raw())),
+        DynamicImage::ImageRgba32F(b) => (4, PixelData::F32(b.as_raw())),
+        other => {
+            return Err(decode_error(format!(
+                "unsupported pixel type {:?}",
+                other.color()
+            )));
+        }
+    };
+    GrayImage::from_raw(w, h, channels, pixels).map_err(|e| decode_error(e.to_string()))
+}

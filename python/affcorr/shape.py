@@ -1,0 +1,216 @@
+"""The shape network: affine correspondences from two images and matched points.
+
+For each match ``x1 <-> x2``, a 32x32 grayscale patch is cut around ``x1`` in image A and around
+``x2`` in image B (bilinear; pixel ``(r, c)`` of the patch is the image at
+``(x + c - 15.5, y + r - 15.5)``, with pixel centres at integer coordinates and edge replication
+outside). The network gives each patch an orientation ``O`` and a scale ``S`` (softmax-mean
+decoding over the bins in its metadata) and the pair a residual shape ``A'' = (x0, x1, x2)``;
+the affine map of the AC is (DESIGN.md §2, paper eq. 7)::
+
+    A = S_AB * R(O_AB) * A'(A''),   O_AB = O_B - O_A,   S_AB = S_B / S_A.
+
+Inference runs in Rust through ONNX Runtime: the library is taken from ``ORT_DYLIB_PATH`` if set,
+else from the installed ``onnxruntime`` wheel (``onnxruntime/capi/libonnxruntime.so*``). The
+GIL is released while images are decoded, patches cut and the network run.
+
+Errors: bad arguments raise ``ValueError`` naming the argument; a missing image or model file
+raises ``FileNotFoundError``; ONNX Runtime and model problems (library missing, not ONNX,
+contract violations) raise ``RuntimeError``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Union
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import _native
+
+__all__ = [
+    "ShapeEstimate",
+    "ShapeEstimator",
+    "bundled_shape_model",
+    "extract_patches",
+    "find_ort_library",
+    "read_gray_image",
+]
+
+#: An image: a PNG/JPEG file path, or an array (H, W) / (H, W, C), C in 1..4, of dtype uint8
+#: (divided by 255), uint16 (divided by 65535) or float (values in [0, 1]).
+ImageLike = Union[str, "os.PathLike[str]", np.ndarray]
+
+_LIBRARY_PATTERNS = ("libonnxruntime.so*", "libonnxruntime*.dylib", "onnxruntime.dll")
+
+
+def bundled_shape_model() -> Path:
+    """The shape network shipped in the package (``affcorr/models/shape.onnx``)."""
+    return Path(__file__).resolve().parent / "models" / "shape.onnx"
+
+
+def find_ort_library() -> Path | None:
+    """The ONNX Runtime library to load, or ``None`` to let ``ORT_DYLIB_PATH`` decide.
+
+    With ``ORT_DYLIB_PATH`` set (non-empty) this returns ``None`` and the Rust side loads that
+    library. Otherwise it returns the library inside the installed ``onnxruntime`` package
+    (found without importing it) and raises ``RuntimeError`` when there is none.
+    """
+    if os.environ.get("ORT_DYLIB_PATH"):
+        return None
+    spec = importlib.util.find_spec("onnxruntime")
+    roots = list(spec.submodule_search_locations or []) if spec is not None else []
+    for root in roots:
+        capi = Path(root) / "capi"
+        for pattern in _LIBRARY_PATTERNS:
+            found = sorted(capi.glob(pattern), key=lambda p: (len(p.name), p.name))
+            if found:
+                # The most specific name (libonnxruntime.so.1.31.1 over libonnxruntime.so).
+                return found[-1]
+    raise RuntimeError(
+        "ONNX Runtime library not found: `pip install onnxruntime` (its wheel ships "
+        "onnxruntime/capi/libonnxruntime.so.<version>), or set ORT_DYLIB_PATH to a "
+        "libonnxruntime >= 1.20"
+    )
+
+
+@dataclass(frozen=True)
+class ShapeEstimate:
+    """ACs with the per-patch quantities they were built from (all float64)."""
+
+    #: (N, 8) rows [x1, y1, x2, y2, a11, a12, a21, a22], A = dx2/dx1.
+    corrs: NDArray[np.float64]
+    #: (N,) orientation O of each patch of image A, radians in (-pi, pi].
+    orientation_a: NDArray[np.float64]
+    #: (N,) orientation O of each patch of image B, radians in (-pi, pi].
+    orientation_b: NDArray[np.float64]
+    #: (N,) scale S of each patch of image A.
+    scale_a: NDArray[np.float64]
+    #: (N,) scale S of each patch of image B.
+    scale_b: NDArray[np.float64]
+    #: (N, 3) residual shape A'' = (x0, x1, x2) of each pair.
+    residual_shape: NDArray[np.float64]
+
+
+class ShapeEstimator:
+    """The shape network, ready to turn matches into affine correspondences.
+
+    Args:
+        model: path of a ``.onnx`` file with the ``shape-v1`` contract (DESIGN.md §6); ``None``
+            for the bundled model (:func:`bundled_shape_model`).
+        threads: ONNX Runtime intra-op threads; ``None`` for every core.
+        batch_size: patch pairs per inference run.
+
+    The model's contract (input/output names, metadata, logit widths) is checked on loading.
+
+    >>> import numpy as np, affcorr
+    >>> est = affcorr.ShapeEstimator(threads=1)
+    >>> img = np.random.default_rng(0).random((64, 80))
+    >>> corrs = est.estimate(img, img, [[40.0, 30.0]], [[41.5, 29.0]])
+    >>> corrs.shape
+    (1, 8)
+    """
+
+    def __init__(
+        self,
+        model: str | os.PathLike[str] | None = None,
+        *,
+        threads: int | None = None,
+        batch_size: int = 512,
+    ) -> None:
+        path = bundled_shape_model() if model is None else Path(os.fspath(model))
+        if threads is not None and (not isinstance(threads, int) or threads < 1):
+            raise ValueError(f"threads must be a positive int or None, got {threads!r}")
+        if not isinstance(batch_size, int) or batch_size < 1:
+            raise ValueError(f"batch_size must be a positive int, got {batch_size!r}")
+        self._model_path = path
+        self._runner = _native.ShapeRunner(
+            str(path), ort_library=find_ort_library(), threads=threads, batch_size=batch_size
+        )
+
+    @property
+    def model_path(self) -> Path:
+        """The model file."""
+        return self._model_path
+
+    @property
+    def angle_bins(self) -> NDArray[np.float64]:
+        """Angle bin centres (radians) from the model's metadata."""
+        return self._runner.angle_bins
+
+    @property
+    def scale_bins(self) -> NDArray[np.float64]:
+        """Scale bin centres (linear factors) from the model's metadata."""
+        return self._runner.scale_bins
+
+    @property
+    def metadata(self) -> dict[str, str]:
+        """All custom metadata of the model (e.g. ``trained``)."""
+        return self._runner.metadata
+
+    @property
+    def threads(self) -> int:
+        """ONNX Runtime intra-op threads."""
+        return self._runner.threads
+
+    @property
+    def batch_size(self) -> int:
+        """Patch pairs per inference run."""
+        return self._runner.batch_size
+
+    def estimate(
+        self, image_a: ImageLike, image_b: ImageLike, x1: ArrayLike, x2: ArrayLike
+    ) -> NDArray[np.float64]:
+        """ACs ``(N, 8)`` of the matches ``x1 (N, 2)`` in image A <-> ``x2 (N, 2)`` in image B."""
+        return self._runner.estimate(image_a, image_b, x1, x2)[0]
+
+    def estimate_detailed(
+        self, image_a: ImageLike, image_b: ImageLike, x1: ArrayLike, x2: ArrayLike
+    ) -> ShapeEstimate:
+        """Like :meth:`estimate`, with the per-patch orientations, scales and residual shapes."""
+        return ShapeEstimate(*self._runner.estimate(image_a, image_b, x1, x2))
+
+    def predict(
+        self, patches_a: ArrayLike, patches_b: ArrayLike, *, return_logits: bool = False
+    ) -> dict[str, np.ndarray]:
+        """Run the network on patch pairs ``(N, 1, 32, 32)`` (gray in [0, 1]).
+
+        Returns ``orientation_a``, ``orientation_b``, ``scale_a``, ``scale_b`` (N,) and
+        ``residual_shape`` (N, 3), float64. With ``return_logits`` also the raw float32 outputs
+        ``angle_logits_a/b`` (N, K_theta), ``scale_logits_a/b`` (N, K_s) and
+        ``residual_shape_raw`` (N, 3).
+        """
+        return self._runner.predict(patches_a, patches_b, return_logits)
+
+    def extract_patches(self, image: ImageLike, xy: ArrayLike) -> NDArray[np.float32]:
+        """The network's input patches ``(N, 1, 32, 32)`` around ``xy (N, 2)``; see
+        :func:`extract_patches`."""
+        return _native.extract_patches(image, xy)
+
+    def __repr__(self) -> str:
+        return (
+            f"ShapeEstimator(model={str(self._model_path)!r}, threads={self.threads}, "
+            f"batch_size={self.batch_size})"
+        )
+
+
+def extract_patches(image: ImageLike, xy: ArrayLike) -> NDArray[np.float32]:
+    """32x32 patches ``(N, 1, 32, 32)`` float32 around the sub-pixel centres ``xy (N, 2)``.
+
+    Pixel ``(r, c)`` of a patch is the image read bilinearly at ``(x + c - 15.5, y + r - 15.5)``;
+    reads outside the image replicate its border (``scipy.ndimage.map_coordinates(order=1,
+    mode="nearest")``). Colour images are converted to gray first (:func:`read_gray_image`).
+    """
+    return _native.extract_patches(image, xy)
+
+
+def read_gray_image(image: ImageLike) -> NDArray[np.float32]:
+    """An image as the network sees it: ``(H, W)`` float32 gray in [0, 1].
+
+    Files (PNG, JPEG; 8 or 16 bits) are decoded in Rust. Colour becomes
+    ``0.299 R + 0.587 G + 0.114 B``; alpha is ignored.
+    """
+    return _native.read_gray_image(image)
