@@ -168,6 +168,71 @@ def test_options_are_applied(h_data):
     assert lo.lo_runs >= 1
 
 
+# --- MAGSAC++ and SPRT ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("columns", [8, 4], ids=["ac", "points"])
+def test_magsac_scoring_recovers_ground_truth(h_data, e_data, columns):
+    scene, exact, corrs, truth = h_data
+    H, info = affcorr.estimate_homography(
+        corrs[:, :columns], threshold=H_THRESHOLD, scoring="magsac"
+    )
+    assert transfer_error(H, scene.H, exact[truth, :2]) < 1.0
+    assert recall(info.inliers, truth) >= 0.99
+    again = affcorr.estimate_homography(corrs[:, :columns], threshold=H_THRESHOLD, scoring="magsac")
+    assert np.array_equal(again[0], H) and again[1].score == info.score
+    # The score is MAGSAC++'s, not MSAC's (it weighs residuals differently).
+    _, msac = affcorr.estimate_homography(corrs[:, :columns], threshold=H_THRESHOLD)
+    assert info.score != msac.score
+
+    scene, _, corrs, truth = e_data
+    pose, info = affcorr.estimate_relative_pose(
+        corrs[:, :columns], scene.K1, scene.K2, threshold=E_THRESHOLD, scoring="magsac"
+    )
+    assert angle_deg(pose.R @ scene.R.T) < 0.2
+    assert recall(info.inliers, truth) >= 0.99
+
+
+def test_magsac_keeps_its_accuracy_at_a_loose_threshold(e_data):
+    # 3x the nominal threshold lets near-threshold outliers in: MSAC gives them full weight,
+    # MAGSAC++ marginalises the noise scale.
+    scene, _, corrs, _ = e_data
+    err = {}
+    for scoring in ("msac", "magsac"):
+        errs = [
+            angle_deg(
+                affcorr.estimate_relative_pose(
+                    corrs, scene.K1, scene.K2, threshold=3 * E_THRESHOLD, seed=s, scoring=scoring
+                )[0].R
+                @ scene.R.T
+            )
+            for s in range(5)
+        ]
+        err[scoring] = float(np.median(errs))
+    assert err["magsac"] <= err["msac"], err
+
+
+def test_sprt_keeps_accuracy_and_saves_residuals(h_data, e_data):
+    scene, exact, corrs, truth = h_data
+    runs = {
+        sprt: affcorr.estimate_homography(corrs[:, :4], threshold=H_THRESHOLD, sprt=sprt)
+        for sprt in (False, True)
+    }
+    for H, info in runs.values():
+        assert transfer_error(H, scene.H, exact[truth, :2]) < 1.0
+        assert recall(info.inliers, truth) >= 0.99
+    off, on = runs[False][1], runs[True][1]
+    assert on.sprt_rejections > 0 and off.sprt_rejections == 0
+    assert on.residual_evaluations < 0.5 * off.residual_evaluations
+    scene, _, corrs, truth = e_data
+    for columns in (8, 4):
+        pose, info = affcorr.estimate_relative_pose(
+            corrs[:, :columns], scene.K1, scene.K2, threshold=E_THRESHOLD, sprt=True
+        )
+        assert angle_deg(pose.R @ scene.R.T) < 0.2
+        assert recall(info.inliers, truth) >= 0.99
+
+
 # --- determinism ---------------------------------------------------------------------------------
 
 
@@ -252,6 +317,32 @@ def test_batch_quality_is_per_pair(e_data):
         )
 
 
+def test_batch_pair_options_override_the_shared_ones(h_data):
+    _, _, hc, _ = h_data
+    pairs = [hc, hc, hc[:, :4]]
+    per = [{"seed": 7}, None, {"scoring": "magsac", "sprt": True, "threshold": 3.0}]
+    out = affcorr.estimate_homography_batch(
+        pairs, threshold=H_THRESHOLD, seed=5, max_iterations=500, pair_options=per
+    )
+    expected = [
+        affcorr.estimate_homography(hc, threshold=H_THRESHOLD, seed=7, max_iterations=500),
+        affcorr.estimate_homography(hc, threshold=H_THRESHOLD, seed=5, max_iterations=500),
+        affcorr.estimate_homography(
+            hc[:, :4], threshold=3.0, seed=5, max_iterations=500, scoring="magsac", sprt=True
+        ),
+    ]
+    for (H, info), (H1, info1) in zip(out, expected):
+        assert np.array_equal(H, H1) and info.score == info1.score
+        assert info.num_iterations == info1.num_iterations
+    assert out[2][1].sprt_rejections > 0
+    with pytest.raises(ValueError, match="pair_options"):
+        affcorr.estimate_homography_batch(pairs, pair_options=[{}])
+    with pytest.raises(ValueError, match="pair 1: unknown option bogus"):
+        affcorr.estimate_homography_batch(pairs, pair_options=[{}, {"bogus": 1}, {}])
+    with pytest.raises(ValueError, match="pair 0.*scoring"):
+        affcorr.estimate_homography_batch(pairs, pair_options=[{"scoring": "x"}, {}, {}])
+
+
 # --- no model ------------------------------------------------------------------------------------
 
 
@@ -262,6 +353,12 @@ def test_no_model_returns_zero_inliers_and_nan_model():
     assert info.num_inliers == 0 and not info.inliers.any() and len(info.inliers) == 20
     assert np.isnan(H).all()
     assert info.num_iterations == 50
+    # In a batch too, each pair with its own cap.
+    out = affcorr.estimate_homography_batch(
+        [corrs[:, :4]] * 2, pair_options=[{"max_iterations": 7}, {"max_iterations": 11}]
+    )
+    assert [info.num_iterations for _, info in out] == [7, 11]
+    assert all(info.num_inliers == 0 for _, info in out)
     K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
     pose, info = affcorr.estimate_relative_pose(corrs[:, :4], K, K, max_iterations=50)
     assert info.num_inliers == 0 and np.isnan(pose.R).all() and np.isnan(pose.t).all()

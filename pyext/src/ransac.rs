@@ -11,8 +11,8 @@
 //!   without quality, ...) raise `ValueError` with the core crate's message, which names the
 //!   argument or option.
 //! - When no sample gives a model ([`RansacError::NoModel`]), the call does not raise: like
-//!   PoseLib, it returns an `info` with `num_inliers == 0` and all-false `inliers`, and the
-//!   model is filled with NaN so that it cannot be used by mistake.
+//!   PoseLib, it returns an `info` with `num_inliers == 0`, all-false `inliers` and the
+//!   iterations run, and the model is filled with NaN so that it cannot be used by mistake.
 //! - Estimation runs with the GIL released; the batch forms run the pairs in parallel with
 //!   rayon (`RAYON_NUM_THREADS` caps the threads).
 
@@ -87,6 +87,7 @@ estimator_options! {
     "local_optimization" => |o, v| o.ransac.local_optimization = flag(v, "local_optimization")?;
     "lo_iterations" => |o, v| o.ransac.lo_iterations = integer(v, "lo_iterations")?;
     "final_refinement" => |o, v| o.ransac.final_refinement = flag(v, "final_refinement")?;
+    "sprt" => |o, v| o.ransac.sprt = flag(v, "sprt")?;
     "affine_weight" => |o, v| o.affine_weight = number(v, "affine_weight")?;
 }
 
@@ -98,7 +99,8 @@ const SAMPLERS: &[(&str, SamplerKind)] = &[
     ("uniform", SamplerKind::Uniform),
     ("prosac", SamplerKind::Prosac),
 ];
-const SCORINGS: &[(&str, ScoringKind)] = &[("msac", ScoringKind::Msac)];
+const SCORINGS: &[(&str, ScoringKind)] =
+    &[("msac", ScoringKind::Msac), ("magsac", ScoringKind::Magsac)];
 
 fn choice<T: Copy>(v: &Bound<'_, PyAny>, name: &str, choices: &[(&str, T)]) -> PyResult<T> {
     let names: Vec<String> = choices.iter().map(|(n, _)| format!("'{n}'")).collect();
@@ -191,13 +193,14 @@ struct Outcome<M> {
     score: f64,
     lo_runs: usize,
     refinements: usize,
+    residual_evaluations: u64,
+    sprt_rejections: usize,
 }
 
 /// `NoModel` becomes a NaN model with no inliers; every other error is a `ValueError`.
 fn outcome<M>(
     r: Result<Estimate<M>, RansacError>,
     n: usize,
-    opts: &EstimatorOptions,
     nan: M,
 ) -> Result<Outcome<M>, RansacError> {
     match r {
@@ -209,15 +212,19 @@ fn outcome<M>(
             score: e.score,
             lo_runs: e.lo_runs,
             refinements: e.refinements,
+            residual_evaluations: e.residual_evaluations,
+            sprt_rejections: e.sprt_rejections,
         }),
-        Err(RansacError::NoModel) => Ok(Outcome {
+        Err(RansacError::NoModel { iterations }) => Ok(Outcome {
             model: nan,
             inliers: vec![false; n],
             num_inliers: 0,
-            iterations: opts.ransac.max_iterations,
+            iterations,
             score: 0.0,
             lo_runs: 0,
             refinements: 0,
+            residual_evaluations: 0,
+            sprt_rejections: 0,
         }),
         Err(e) => Err(e),
     }
@@ -250,6 +257,8 @@ fn info<'py, M>(py: Python<'py>, o: &Outcome<M>) -> PyResult<Bound<'py, PyDict>>
     d.set_item("score", o.score)?;
     d.set_item("lo_runs", o.lo_runs)?;
     d.set_item("refinements", o.refinements)?;
+    d.set_item("residual_evaluations", o.residual_evaluations)?;
+    d.set_item("sprt_rejections", o.sprt_rejections)?;
     Ok(d)
 }
 
@@ -292,7 +301,7 @@ fn run_one<M: Send>(
     let (slice, width) = (a.as_slice(), a.shape()[1]);
     py.detach(move || {
         let data = rows_to_corrs(slice, width)?;
-        outcome(f(&data, &opts), data.len(), &opts, nan)
+        outcome(f(&data, &opts), data.len(), nan)
     })
     .map_err(value_error)
 }
@@ -371,16 +380,20 @@ fn read_batch<'py>(
                 .map_err(|e| pair_error(i, e))
         })
         .collect::<PyResult<Vec<_>>>()?;
-    // `quality` is per pair in a batch: a sequence of (N_i,) arrays (or None entries).
-    let options = match options {
+    // `quality` is per pair in a batch: a sequence of (N_i,) arrays (or None entries);
+    // `pair_options` a sequence of option dicts, one per pair, over the shared options.
+    let (quality, pair_options, options) = match options {
         Some(d) => {
             let d = d.copy()?;
             let quality = d.get_item("quality")?;
             d.del_item("quality").ok();
-            (quality, Some(d))
+            let pair_options = d.get_item("pair_options")?;
+            d.del_item("pair_options").ok();
+            (quality, pair_options, Some(d))
         }
-        None => (None, None),
+        None => (None, None, None),
     };
+    let options = (quality, options);
     let shared = parse_options(options.1.as_ref())?;
     let mut per_pair = vec![shared; arrays.len()];
     if let Some(q) = options.0.filter(|q| !q.is_none()) {
@@ -403,6 +416,50 @@ fn read_batch<'py>(
             } else {
                 Some(vector(q, "quality").map_err(|e| pair_error(i, e))?)
             };
+        }
+    }
+    if let Some(p) = pair_options.filter(|p| !p.is_none()) {
+        let list: Vec<Bound<'py, PyAny>> = p
+            .try_iter()
+            .map_err(|_| {
+                PyValueError::new_err("pair_options must be a sequence of dicts, one per pair")
+            })?
+            .collect::<PyResult<_>>()?;
+        if list.len() != arrays.len() {
+            return Err(PyValueError::new_err(format!(
+                "pair_options must have one entry per pair: got {} for {} pairs",
+                list.len(),
+                arrays.len()
+            )));
+        }
+        for (i, (o, d)) in per_pair.iter_mut().zip(&list).enumerate() {
+            if d.is_none() {
+                continue;
+            }
+            let d = d.cast::<PyDict>().map_err(|_| {
+                PyValueError::new_err(format!("pair {i}: pair_options entries must be dicts"))
+            })?;
+            let mut unknown = Vec::new();
+            for (key, value) in d.iter() {
+                let name: String = key.extract()?;
+                if name == "quality" {
+                    o.quality = if value.is_none() {
+                        None
+                    } else {
+                        Some(vector(&value, "quality").map_err(|e| pair_error(i, e))?)
+                    };
+                } else if !apply_option(o, &name, &value).map_err(|e| pair_error(i, e))? {
+                    unknown.push(name);
+                }
+            }
+            if !unknown.is_empty() {
+                return Err(PyValueError::new_err(format!(
+                    "pair {i}: unknown option{} {}; valid options: {}",
+                    if unknown.len() > 1 { "s" } else { "" },
+                    unknown.join(", "),
+                    OPTION_NAMES.join(", ")
+                )));
+            }
         }
     }
     Ok(Batch {
@@ -437,8 +494,7 @@ fn run_batch<M: Send + Clone + Sync>(
             .enumerate()
             .map(|(i, &(slice, width))| {
                 let data = rows_to_corrs(slice, width).map_err(|e| (i, e))?;
-                outcome(f(i, &data, &opts[i]), data.len(), &opts[i], nan.clone())
-                    .map_err(|e| (i, e))
+                outcome(f(i, &data, &opts[i]), data.len(), nan.clone()).map_err(|e| (i, e))
             })
             .collect()
     });

@@ -20,13 +20,20 @@ loop with adaptive termination, local optimisation and a final refinement (DESIG
   ``quality``            ``None``     ``(N,)`` per-correspondence quality for PROSAC, higher is
                                       better (e.g. matcher certainty); in the batch forms a
                                       list with one ``(N_i,)`` array per pair
-  ``scoring``            ``"msac"``   the score of a model (MSAC, the truncated quadratic)
+  ``scoring``            ``"msac"``   the score of a model: ``"msac"`` (the truncated
+                                      quadratic) or ``"magsac"`` (MAGSAC++: the sigma-consensus++
+                                      loss marginalised over noise scales up to
+                                      ``threshold / 3.64``; also the loss of local optimisation
+                                      and of the final refinement; robust to a loose threshold)
   ``confidence``         ``0.9999``   confidence of the adaptive stopping rule, in (0, 1)
   ``min_iterations``     ``0``        never fewer iterations
   ``max_iterations``     ``10000``    never more iterations
   ``local_optimization`` ``True``     iterated least squares on the inliers of each new best
   ``lo_iterations``      ``10``       most refits in one local optimisation
   ``final_refinement``   ``True``     polish the final model on its inliers
+  ``sprt``               ``False``    verify hypotheses with Wald's SPRT (random order, adaptive
+                                      epsilon and delta): far fewer residuals for the same
+                                      result accuracy, slightly more iterations
   ``affine_weight``      ``0.0``      weight of the affine residual in scoring (``(N, 8)``
                                       only; 0: points only); see the Rust problem docs
   ====================== ============ =========================================================
@@ -36,8 +43,12 @@ loop with adaptive termination, local optimisation and a final refinement (DESIG
   infinity, an invalid ``K``, ``threshold <= 0``, fewer correspondences than a minimal sample,
   PROSAC without ``quality`` or with the wrong length, ``sample="affine"`` with ``(N, 4)`` data.
 - When no model is found (every sample degenerate, or no inlier at all), nothing is raised: as
-  in PoseLib, ``info.num_inliers == 0`` and ``info.inliers`` is all ``False``; the model is
-  filled with NaN so that it cannot be used by mistake. Check ``info.num_inliers``.
+  in PoseLib, ``info.num_inliers == 0`` and ``info.inliers`` is all ``False``
+  (``info.num_iterations`` still counts the samples drawn); the model is filled with NaN so
+  that it cannot be used by mistake. Check ``info.num_inliers``.
+- The ``_batch`` forms take the options once for every pair, and ``pair_options``: a list with
+  one dict per pair (or ``None``) whose entries override the shared options for that pair
+  (``threshold``, ``seed`` and ``quality`` included).
 - The same data, options and ``seed`` give bit-identical results.
 """
 
@@ -77,9 +88,12 @@ class RansacInfo:
         num_inliers: their number (0 when no model was found).
         num_iterations: minimal samples drawn.
         score: the model's score (MSAC: the sum over data of ``max(0, 1 - r^2 / threshold^2)``;
-            higher is better).
+            MAGSAC++: of ``1 - loss(r) / loss(threshold)``; higher is better).
         lo_runs: local optimisations run.
         refinements: 1 if the final refinement improved the model, else 0.
+        residual_evaluations: residuals computed to verify and score models (what the SPRT
+            saves).
+        sprt_rejections: hypotheses rejected by the SPRT (0 without it).
     """
 
     inliers: NDArray[np.bool_]
@@ -88,6 +102,8 @@ class RansacInfo:
     score: float
     lo_runs: int
     refinements: int
+    residual_evaluations: int = 0
+    sprt_rejections: int = 0
 
     @property
     def inlier_ratio(self) -> float:
@@ -252,12 +268,18 @@ def estimate_relative_pose(
 
 
 def estimate_homography_batch(
-    corrs: Sequence[ArrayLike], *, threshold: float = 1.0, seed: int = 0, **options: Any
+    corrs: Sequence[ArrayLike],
+    *,
+    threshold: float = 1.0,
+    seed: int = 0,
+    pair_options: Sequence[dict[str, Any] | None] | None = None,
+    **options: Any,
 ) -> list[tuple[NDArray[np.float64], RansacInfo]]:
     """:func:`estimate_homography` over many image pairs, in parallel in Rust (rayon; the GIL
     is released; ``RAYON_NUM_THREADS`` caps the threads). Each pair gets the same options and
-    seed, so each result equals the single-pair call's. ``quality`` is a list, one ``(N_i,)``
-    array per pair. Invalid input in any pair raises ``ValueError`` naming the pair.
+    seed, so each result equals the single-pair call's, unless ``pair_options`` (one dict or
+    ``None`` per pair) overrides some for a pair. ``quality`` is a list, one ``(N_i,)`` array per
+    pair. Invalid input in any pair raises ``ValueError`` naming the pair.
 
     Example:
         >>> import numpy as np, affcorr
@@ -267,17 +289,28 @@ def estimate_homography_batch(
         >>> out = affcorr.estimate_homography_batch(pairs)
         >>> [round(float(H[0, 0] / H[2, 2]), 6) for H, _ in out]
         [0.9, 1.0, 1.1]
+        >>> out = affcorr.estimate_homography_batch(
+        ...     pairs, pair_options=[{"seed": 1}, None, {"scoring": "magsac", "threshold": 3.0}])
+        >>> [int(info.num_inliers) for _, info in out]
+        [100, 100, 100]
     """
-    out = _native.estimate_homography_batch(corrs, threshold=threshold, seed=seed, **options)
+    out = _native.estimate_homography_batch(
+        corrs, threshold=threshold, seed=seed, pair_options=pair_options, **options
+    )
     return [(h, _info(i)) for h, i in out]
 
 
 def estimate_fundamental_batch(
-    corrs: Sequence[ArrayLike], *, threshold: float = 1.0, seed: int = 0, **options: Any
+    corrs: Sequence[ArrayLike],
+    *,
+    threshold: float = 1.0,
+    seed: int = 0,
+    pair_options: Sequence[dict[str, Any] | None] | None = None,
+    **options: Any,
 ) -> list[tuple[NDArray[np.float64], RansacInfo]]:
     """:func:`estimate_fundamental` over many image pairs, in parallel in Rust (GIL released).
 
-    Options as in :func:`estimate_homography_batch`.
+    Options (and ``pair_options``) as in :func:`estimate_homography_batch`.
 
     Example:
         >>> import numpy as np, affcorr
@@ -286,7 +319,9 @@ def estimate_fundamental_batch(
         >>> [len(info.inliers) for _, info in affcorr.estimate_fundamental_batch(pairs)]
         [50, 50]
     """
-    out = _native.estimate_fundamental_batch(corrs, threshold=threshold, seed=seed, **options)
+    out = _native.estimate_fundamental_batch(
+        corrs, threshold=threshold, seed=seed, pair_options=pair_options, **options
+    )
     return [(f, _info(i)) for f, i in out]
 
 
@@ -297,6 +332,7 @@ def estimate_relative_pose_batch(
     *,
     threshold: float = 1.0,
     seed: int = 0,
+    pair_options: Sequence[dict[str, Any] | None] | None = None,
     **options: Any,
 ) -> list[tuple[RelativePose, RansacInfo]]:
     """:func:`estimate_relative_pose` over many image pairs, in parallel in Rust (GIL released).
@@ -307,6 +343,7 @@ def estimate_relative_pose_batch(
             per pair.
         threshold, seed, **options: as in :func:`estimate_relative_pose`, shared by the pairs
             (``quality``: one array per pair).
+        pair_options: one dict (or ``None``) per pair overriding the shared options.
 
     Example:
         >>> import numpy as np, affcorr
@@ -322,6 +359,6 @@ def estimate_relative_pose_batch(
         [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
     """
     out = _native.estimate_relative_pose_batch(
-        corrs, K1, K2, threshold=threshold, seed=seed, **options
+        corrs, K1, K2, threshold=threshold, seed=seed, pair_options=pair_options, **options
     )
     return [(_pose(m), _info(i)) for m, i in out]

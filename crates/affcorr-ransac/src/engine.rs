@@ -9,10 +9,9 @@
 use crate::error::{RansacError, Result};
 use crate::options::RansacOptions;
 use crate::problem::Problem;
-use crate::refine::Loss;
 use crate::sampler::Sampler;
 use crate::score::Scoring;
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
 /// Residuals are scored in blocks of this many data, checking the bail-out between blocks.
@@ -35,14 +34,20 @@ pub struct Estimate<M> {
     pub lo_runs: usize,
     /// Times the final refinement improved the model (0 or 1).
     pub refinements: usize,
+    /// Squared residuals computed (scoring, local optimisation, refinement excluded): the
+    /// verification cost that the SPRT cuts.
+    pub residual_evaluations: u64,
+    /// Hypotheses rejected by the SPRT (0 without it).
+    pub sprt_rejections: usize,
 }
 
-/// A model with its score and inlier count.
+/// A model with its score, inlier count and support at [`LO_TRIGGER_SCALE`] × the threshold.
 #[derive(Clone)]
 struct Scored<M> {
     model: M,
     score: f64,
     inliers: usize,
+    wide_support: usize,
 }
 
 /// A model's score, its inliers, and its support at [`LO_TRIGGER_SCALE`] × the threshold.
@@ -50,6 +55,12 @@ struct Evaluation {
     score: f64,
     inliers: usize,
     wide_support: usize,
+}
+
+/// The residual buffer and the count of residuals computed.
+struct Scratch {
+    buf: Vec<f64>,
+    evaluations: u64,
 }
 
 /// Scores `model` on all data; `None` as soon as it can beat neither `to_beat` (the best score)
@@ -60,13 +71,13 @@ fn score_model<P: Problem, S: Scoring>(
     model: &P::Model,
     to_beat: f64,
     wide_to_beat: usize,
-    buf: &mut [f64],
+    scratch: &mut Scratch,
 ) -> Option<Evaluation> {
     let n = problem.len();
     let thr = scoring.inlier_threshold_sq();
     let wide_thr = thr * LO_TRIGGER_SCALE * LO_TRIGGER_SCALE;
     let (mut score, mut inliers, mut wide_support) = (0.0, 0usize, 0usize);
-    let complete = for_each_block(problem, model, buf, |start, block| {
+    let complete = for_each_block(problem, model, scratch, |start, block| {
         for &r2 in block {
             score += scoring.quality(r2);
             inliers += usize::from(r2 < thr);
@@ -90,14 +101,14 @@ fn collect_inliers<P: Problem, S: Scoring>(
     scoring: &S,
     model: &P::Model,
     scale: f64,
-    buf: &mut [f64],
+    scratch: &mut Scratch,
     indices: &mut Vec<usize>,
     weights: &mut Vec<f64>,
 ) {
     indices.clear();
     weights.clear();
     let thr = scoring.inlier_threshold_sq() * scale * scale;
-    for_each_block(problem, model, buf, |start, block| {
+    for_each_block(problem, model, scratch, |start, block| {
         for (k, &r2) in block.iter().enumerate() {
             if r2 < thr {
                 indices.push(start + k);
@@ -108,21 +119,23 @@ fn collect_inliers<P: Problem, S: Scoring>(
     });
 }
 
-/// Computes the squared residuals of all data block by block into `buf` and hands each block
-/// (with its first index) to `visit`, which returns false to stop early. Returns whether every
-/// block was visited.
+/// Computes the squared residuals of all data block by block into the scratch buffer and hands
+/// each block (with its first index) to `visit`, which returns false to stop early. Returns
+/// whether every block was visited.
 fn for_each_block<P: Problem>(
     problem: &P,
     model: &P::Model,
-    buf: &mut [f64],
+    scratch: &mut Scratch,
     mut visit: impl FnMut(usize, &[f64]) -> bool,
 ) -> bool {
     let n = problem.len();
     let mut start = 0;
     while start < n {
         let len = BLOCK.min(n - start);
-        problem.residuals(model, start, &mut buf[..len]);
-        if !visit(start, &buf[..len]) {
+        let buf = &mut scratch.buf[..len];
+        problem.residuals(model, start, buf);
+        scratch.evaluations += len as u64;
+        if !visit(start, buf) {
             return false;
         }
         start += len;
@@ -130,10 +143,187 @@ fn for_each_block<P: Problem>(
     true
 }
 
-/// Adaptive bound on the number of iterations for `inliers` of `n` at `confidence`.
-fn iterations_needed(inliers: usize, n: usize, m: usize, confidence: f64) -> usize {
+/// Data per SPRT decision: the likelihood ratio is tested after each chunk of this many data
+/// (a group-sequential form of Wald's test).
+const SPRT_CHUNK: usize = 16;
+
+/// Wald's sequential probability ratio test of a hypothesis (Matas & Chum, ICCV 2005; Chum &
+/// Matas, PAMI 2008), with ε (probability that a datum is consistent with a good model) and δ
+/// (with a bad one) estimated during the run.
+///
+/// Data are visited in a fixed, seeded random order (the input may be sorted, e.g. by plane or
+/// by matcher score); after each datum the likelihood ratio λ is multiplied by δ/ε (consistent)
+/// or (1 − δ)/(1 − ε) (not), and the hypothesis is rejected once λ > A. A is the optimum of
+/// the expected run time, A = t_M·C/m_S + 1 + ln A with C = (1 − δ) ln((1 − δ)/(1 − ε)) +
+/// δ ln(δ/ε), t_M the cost of a minimal fit in residuals ([`Problem::model_cost`]) and m_S the
+/// mean number of models per sample. A good model is rejected with probability ≤ 1/A, which
+/// the iteration bound compensates for.
+struct Sprt {
+    order: Vec<usize>,
+    /// Squared residual below which a datum is consistent.
+    threshold_sq: f64,
+    epsilon: f64,
+    delta: f64,
+    log_a: f64,
+    /// ln(δ/ε) and ln((1 − δ)/(1 − ε)).
+    step_consistent: f64,
+    step_inconsistent: f64,
+    model_cost: f64,
+    samples: u64,
+    models: u64,
+    /// Consistent and evaluated data over the rejected hypotheses (δ's estimate).
+    rejected_consistent: u64,
+    rejected_evaluated: u64,
+    /// Hypotheses rejected.
+    rejections: usize,
+}
+
+/// The SPRT's outcome for one hypothesis.
+enum Verdict {
+    /// Verified on all data.
+    Complete(Evaluation),
+    /// Rejected by the SPRT.
+    Rejected,
+    /// Stopped by the exact bail-out (cannot beat the best).
+    Beaten,
+}
+
+impl Sprt {
+    const INITIAL_EPSILON: f64 = 0.1;
+    const INITIAL_DELTA: f64 = 0.01;
+
+    fn new(n: usize, threshold_sq: f64, model_cost: f64, rng: &mut Pcg64) -> Self {
+        let mut order: Vec<usize> = (0..n).collect();
+        // Fisher–Yates with the run's generator: deterministic for a seed.
+        for i in (1..n).rev() {
+            order.swap(i, rng.random_range(0..=i));
+        }
+        let mut s = Self {
+            order,
+            threshold_sq,
+            epsilon: Self::INITIAL_EPSILON,
+            delta: Self::INITIAL_DELTA,
+            log_a: f64::INFINITY,
+            step_consistent: 0.0,
+            step_inconsistent: 0.0,
+            model_cost,
+            samples: 0,
+            models: 0,
+            rejected_consistent: 0,
+            rejected_evaluated: 0,
+            rejections: 0,
+        };
+        s.update_threshold();
+        s
+    }
+
+    /// Recomputes A and the λ steps from ε, δ and m_S.
+    fn update_threshold(&mut self) {
+        let (e, d) = (self.epsilon, self.delta);
+        // The test separates nothing when a bad model explains as much as a good one.
+        if !(d < 0.8 * e && e < 1.0) {
+            self.log_a = f64::INFINITY;
+            return;
+        }
+        let c = (1.0 - d) * ((1.0 - d) / (1.0 - e)).ln() + d * (d / e).ln();
+        let m_s = if self.samples == 0 {
+            1.0
+        } else {
+            (self.models as f64 / self.samples as f64).max(1.0)
+        };
+        let base = self.model_cost * c / m_s + 1.0;
+        let mut a = base;
+        for _ in 0..20 {
+            let next = base + a.ln();
+            if (next - a).abs() < 1e-9 * a {
+                a = next;
+                break;
+            }
+            a = next;
+        }
+        self.log_a = a.ln();
+        self.step_consistent = (d / e).ln();
+        self.step_inconsistent = ((1.0 - d) / (1.0 - e)).ln();
+    }
+
+    /// Probability that a good model passes the test, 1 − 1/A.
+    fn pass_probability(&self) -> f64 {
+        1.0 - (-self.log_a).exp()
+    }
+
+    /// A new best model with `consistent` of `n` data consistent: ε follows it.
+    fn new_best(&mut self, consistent: usize, n: usize) {
+        let e = (consistent as f64 / n as f64).clamp(1e-6, 1.0 - 1e-6);
+        if e > self.epsilon {
+            self.epsilon = e;
+            self.update_threshold();
+        }
+    }
+
+    /// Verifies `model`; see [`Verdict`].
+    #[allow(clippy::too_many_arguments)]
+    fn verify<P: Problem, S: Scoring>(
+        &mut self,
+        problem: &P,
+        scoring: &S,
+        model: &P::Model,
+        to_beat: f64,
+        wide_to_beat: usize,
+        scratch: &mut Scratch,
+    ) -> Verdict {
+        let n = problem.len();
+        let thr = scoring.inlier_threshold_sq();
+        let wide_thr = thr * LO_TRIGGER_SCALE * LO_TRIGGER_SCALE;
+        let (mut score, mut inliers, mut wide_support) = (0.0, 0usize, 0usize);
+        let (mut consistent, mut log_lambda) = (0usize, 0.0);
+        let mut done = 0;
+        while done < n {
+            let len = SPRT_CHUNK.min(n - done);
+            let buf = &mut scratch.buf[..len];
+            problem.residuals_at(model, &self.order[done..done + len], buf);
+            scratch.evaluations += len as u64;
+            let mut c = 0usize;
+            for &r2 in buf.iter() {
+                score += scoring.quality(r2);
+                inliers += usize::from(r2 < thr);
+                wide_support += usize::from(r2 < wide_thr);
+                c += usize::from(r2 < self.threshold_sq);
+            }
+            consistent += c;
+            done += len;
+            log_lambda +=
+                c as f64 * self.step_consistent + (len - c) as f64 * self.step_inconsistent;
+            if log_lambda > self.log_a {
+                self.rejections += 1;
+                self.rejected_consistent += consistent as u64;
+                self.rejected_evaluated += done as u64;
+                let d = (self.rejected_consistent as f64 / self.rejected_evaluated as f64)
+                    .clamp(1e-4, 0.5);
+                // Re-derive A when δ's estimate moved by more than 5%.
+                if (d - self.delta).abs() > 0.05 * self.delta {
+                    self.delta = d;
+                    self.update_threshold();
+                }
+                return Verdict::Rejected;
+            }
+            let rest = n - done;
+            if !(score + rest as f64 > to_beat || wide_support + rest > wide_to_beat) {
+                return Verdict::Beaten;
+            }
+        }
+        Verdict::Complete(Evaluation {
+            score,
+            inliers,
+            wide_support,
+        })
+    }
+}
+
+/// Adaptive bound on the number of iterations for `inliers` of `n` at `confidence`, when an
+/// all-inlier sample's model survives verification with probability `pass`.
+fn iterations_needed(inliers: usize, n: usize, m: usize, confidence: f64, pass: f64) -> usize {
     let w = inliers as f64 / n as f64;
-    let p_good = w.powi(m as i32);
+    let p_good = w.powi(m as i32) * pass;
     if p_good >= 1.0 {
         return 1;
     }
@@ -201,8 +391,24 @@ where
     let mut rng = Pcg64::seed_from_u64(options.seed);
     let mut sample = vec![0usize; m];
     let mut models: Vec<P::Model> = Vec::with_capacity(16);
-    let mut buf = vec![0.0; BLOCK.min(n)];
+    let mut scratch = Scratch {
+        buf: vec![0.0; BLOCK.min(n)],
+        evaluations: 0,
+    };
     let (mut lo_indices, mut lo_weights) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let lo = options.local_optimization;
+    // With local optimisation, a hypothesis is worth verifying if it explains data at the
+    // LO trigger's wide threshold (see `promising` below); the SPRT tests consistency there.
+    let mut sprt = options.sprt.then(|| {
+        let scale = if lo { LO_TRIGGER_SCALE } else { 1.0 };
+        let mut order_rng = Pcg64::seed_from_u64(options.seed ^ 0x5350_5254);
+        Sprt::new(
+            n,
+            scoring.inlier_threshold_sq() * scale * scale,
+            problem.model_cost(),
+            &mut order_rng,
+        )
+    });
 
     let mut best: Option<Scored<P::Model>> = None;
     let mut best_wide_support = 0usize;
@@ -217,12 +423,35 @@ where
         sampler.sample(&mut rng, n, &mut sample);
         models.clear();
         problem.fit_minimal(&sample, &mut models);
+        if let Some(s) = sprt.as_mut() {
+            s.samples += 1;
+            s.models += models.len() as u64;
+        }
         for model in models.drain(..) {
             let to_beat = best.as_ref().map_or(0.0, |b| b.score);
-            let lo = options.local_optimization;
             let wide_to_beat = if lo { best_wide_support } else { usize::MAX };
-            let Some(e) = score_model(problem, scoring, &model, to_beat, wide_to_beat, &mut buf)
-            else {
+            let e = match sprt.as_mut() {
+                None => score_model(
+                    problem,
+                    scoring,
+                    &model,
+                    to_beat,
+                    wide_to_beat,
+                    &mut scratch,
+                ),
+                Some(s) => match s.verify(
+                    problem,
+                    scoring,
+                    &model,
+                    to_beat,
+                    wide_to_beat,
+                    &mut scratch,
+                ) {
+                    Verdict::Complete(e) => Some(e),
+                    Verdict::Rejected | Verdict::Beaten => None,
+                },
+            };
+            let Some(e) = e else {
                 continue;
             };
             // A hypothesis that is not the best at the threshold but has the widest support so
@@ -237,6 +466,7 @@ where
                 model,
                 score: e.score,
                 inliers: e.inliers,
+                wide_support: e.wide_support,
             };
             if lo && e.wide_support > m {
                 lo_runs += 1;
@@ -245,13 +475,24 @@ where
                     scoring,
                     candidate,
                     options,
-                    &mut buf,
+                    &mut scratch,
                     &mut lo_indices,
                     &mut lo_weights,
                 );
             }
             if candidate.score > to_beat {
-                bound = iterations_needed(candidate.inliers, n, m, options.confidence);
+                if let Some(s) = sprt.as_mut() {
+                    s.new_best(
+                        if lo {
+                            candidate.wide_support
+                        } else {
+                            candidate.inliers
+                        },
+                        n,
+                    );
+                }
+                let pass = sprt.as_ref().map_or(1.0, Sprt::pass_probability);
+                bound = iterations_needed(candidate.inliers, n, m, options.confidence, pass);
                 // The best model's inliers bound its wide support from below: a raw hypothesis
                 // must out-support the optimised best, not just earlier raw ones, to earn an LO.
                 best_wide_support = best_wide_support.max(candidate.inliers);
@@ -260,7 +501,7 @@ where
         }
     }
 
-    let mut best = best.ok_or(RansacError::NoModel)?;
+    let mut best = best.ok_or(RansacError::NoModel { iterations })?;
     let mut refinements = 0;
     if options.final_refinement {
         collect_inliers(
@@ -268,7 +509,7 @@ where
             scoring,
             &best.model,
             1.0,
-            &mut buf,
+            &mut scratch,
             &mut lo_indices,
             &mut lo_weights,
         );
@@ -276,26 +517,30 @@ where
             && let Some(refined) = problem.refine(
                 &best.model,
                 &lo_indices,
-                // MSAC's own cost (PoseLib's choice too): the refined model optimises what the
-                // score measures.
-                &Loss::Truncated {
-                    threshold_sq: scoring.inlier_threshold_sq(),
-                },
+                // The scoring's own cost: the refined model optimises what the score measures.
+                &scoring.refinement_loss(),
                 FINAL_LM_ITERATIONS,
             )
-            && let Some(e) =
-                score_model(problem, scoring, &refined, best.score, usize::MAX, &mut buf)
+            && let Some(e) = score_model(
+                problem,
+                scoring,
+                &refined,
+                best.score,
+                usize::MAX,
+                &mut scratch,
+            )
             && e.score > best.score
         {
             best = Scored {
                 model: refined,
                 score: e.score,
                 inliers: e.inliers,
+                wide_support: e.wide_support,
             };
             refinements = 1;
         }
     }
-    let inliers = inlier_mask(problem, scoring, &best.model, &mut buf);
+    let inliers = inlier_mask(problem, scoring, &best.model, &mut scratch);
     Ok(Estimate {
         num_inliers: inliers.iter().filter(|&&b| b).count(),
         model: best.model,
@@ -304,6 +549,8 @@ where
         iterations,
         lo_runs,
         refinements,
+        residual_evaluations: scratch.evaluations,
+        sprt_rejections: sprt.map_or(0, |s| s.rejections),
     })
 }
 
@@ -353,13 +600,21 @@ fn local_optimization<P: Problem, S: Scoring>(
     scoring: &S,
     mut best: Scored<P::Model>,
     options: &RansacOptions,
-    buf: &mut [f64],
+    scratch: &mut Scratch,
     indices: &mut Vec<usize>,
     weights: &mut Vec<f64>,
 ) -> Scored<P::Model> {
     for step in 0..options.lo_iterations {
         let scale = LO_SCHEDULE.get(step).copied().unwrap_or(1.0);
-        collect_inliers(problem, scoring, &best.model, scale, buf, indices, weights);
+        collect_inliers(
+            problem,
+            scoring,
+            &best.model,
+            scale,
+            scratch,
+            indices,
+            weights,
+        );
         if indices.len() <= problem.sample_size() {
             break;
         }
@@ -368,21 +623,20 @@ fn local_optimization<P: Problem, S: Scoring>(
         let refined = problem.refine(
             &best.model,
             indices,
-            &Loss::Cauchy {
-                scale_sq: threshold_sq,
-            },
+            &scoring.lo_loss(threshold_sq),
             LO_LM_ITERATIONS,
         );
         let linear = problem.fit_nonminimal(indices, Some(weights));
         let mut improved = false;
         for model in refined.into_iter().chain(linear) {
-            if let Some(e) = score_model(problem, scoring, &model, best.score, usize::MAX, buf)
+            if let Some(e) = score_model(problem, scoring, &model, best.score, usize::MAX, scratch)
                 && e.score > best.score
             {
                 best = Scored {
                     model,
                     score: e.score,
                     inliers: e.inliers,
+                    wide_support: e.wide_support,
                 };
                 improved = true;
             }
@@ -399,11 +653,11 @@ fn inlier_mask<P: Problem, S: Scoring>(
     problem: &P,
     scoring: &S,
     model: &P::Model,
-    buf: &mut [f64],
+    scratch: &mut Scratch,
 ) -> Vec<bool> {
     let thr = scoring.inlier_threshold_sq();
     let mut mask = Vec::with_capacity(problem.len());
-    for_each_block(problem, model, buf, |_, block| {
+    for_each_block(problem, model, scratch, |_, block| {
         mask.extend(block.iter().map(|&r2| r2 < thr));
         true
     });
@@ -574,14 +828,17 @@ mod tests {
                 ..Default::default()
             },
         );
-        assert_eq!(e.unwrap_err(), RansacError::NoModel);
+        assert_eq!(e.unwrap_err(), RansacError::NoModel { iterations: 50 });
     }
 
     #[test]
     fn iteration_bound_follows_the_formula() {
         // w = 0.5, m = 2, confidence 0.99: log(0.01)/log(0.75) = 16.0
-        assert_eq!(iterations_needed(50, 100, 2, 0.99), 17);
-        assert_eq!(iterations_needed(100, 100, 5, 0.99), 1);
-        assert_eq!(iterations_needed(0, 100, 5, 0.99), usize::MAX);
+        assert_eq!(iterations_needed(50, 100, 2, 0.99, 1.0), 17);
+        assert_eq!(iterations_needed(100, 100, 5, 0.99, 1.0), 1);
+        assert_eq!(iterations_needed(0, 100, 5, 0.99, 1.0), usize::MAX);
+        // A test that passes good models with probability 1/2 doubles the odds against.
+        // log(0.01)/log(1 − 0.125) = 34.5
+        assert_eq!(iterations_needed(50, 100, 2, 0.99, 0.5), 35);
     }
 }

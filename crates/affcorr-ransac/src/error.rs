@@ -35,8 +35,13 @@ pub enum RansacError {
     #[error(transparent)]
     Geometry(#[from] affcorr_geom::GeomError),
     /// No sample gave a model with a single inlier.
-    #[error("no model found: every sample was degenerate or had no inlier")]
-    NoModel,
+    #[error(
+        "no model found in {iterations} iterations: every sample was degenerate or had no inlier"
+    )]
+    NoModel {
+        /// Iterations run (minimal samples drawn) before giving up.
+        iterations: usize,
+    },
 }
 
 /// Result alias of this crate.

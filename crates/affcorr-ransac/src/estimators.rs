@@ -14,7 +14,7 @@ use crate::problems::homography::HomographyProblem;
 use crate::problems::relpose::{PoseModel, RelativePoseProblem};
 use crate::problems::{Correspondences, SampleKind, check_affine_weight, check_kind};
 use crate::sampler::{ProsacSampler, UniformSampler};
-use crate::score::Msac;
+use crate::score::{MagsacPlusPlus, Msac, Scoring};
 use affcorr_geom::Mat3;
 use affcorr_geom::camera::Intrinsics;
 use affcorr_geom::epipolar::pose_from_essential;
@@ -36,6 +36,9 @@ pub enum ScoringKind {
     /// MSAC, the truncated quadratic (default).
     #[default]
     Msac,
+    /// MAGSAC++ ([`MagsacPlusPlus`]): the σ-consensus++ loss marginalised over noise scales up
+    /// to threshold/k; also the loss of local optimisation and of the final refinement.
+    Magsac,
 }
 
 /// Options of every estimator. Defaults are documented at each field.
@@ -68,11 +71,19 @@ fn sample_kind(data: &Correspondences, opts: &EstimatorOptions) -> Result<Sample
 }
 
 fn run<P: Problem>(problem: &P, opts: &EstimatorOptions) -> Result<Estimate<P::Model>> {
-    let scoring = match opts.scoring {
-        ScoringKind::Msac => Msac::new(opts.ransac.threshold),
-    };
+    match opts.scoring {
+        ScoringKind::Msac => run_with(problem, &Msac::new(opts.ransac.threshold), opts),
+        ScoringKind::Magsac => run_with(problem, &MagsacPlusPlus::new(opts.ransac.threshold), opts),
+    }
+}
+
+fn run_with<P: Problem, S: Scoring>(
+    problem: &P,
+    scoring: &S,
+    opts: &EstimatorOptions,
+) -> Result<Estimate<P::Model>> {
     match opts.sampler {
-        SamplerKind::Uniform => estimate(problem, &mut UniformSampler, &scoring, &opts.ransac),
+        SamplerKind::Uniform => estimate(problem, &mut UniformSampler, scoring, &opts.ransac),
         SamplerKind::Prosac => {
             let quality = opts.quality.as_deref().ok_or(RansacError::InvalidOption {
                 name: "quality",
@@ -87,7 +98,7 @@ fn run<P: Problem>(problem: &P, opts: &EstimatorOptions) -> Result<Estimate<P::M
                 });
             }
             let mut sampler = ProsacSampler::new(quality, problem.sample_size());
-            estimate(problem, &mut sampler, &scoring, &opts.ransac)
+            estimate(problem, &mut sampler, scoring, &opts.ransac)
         }
     }
 }
@@ -141,33 +152,90 @@ pub fn estimate_relative_pose(
     Ok(est)
 }
 
-/// [`estimate_homography`] over many image pairs in parallel.
-pub fn estimate_homography_batch(
+/// The options of a batch: one set for every pair, or one per pair.
+#[derive(Debug, Clone, Copy)]
+pub enum BatchOptions<'a> {
+    /// The same options for every pair.
+    Shared(&'a EstimatorOptions),
+    /// `options[i]` for pair i (as many as there are pairs).
+    PerPair(&'a [EstimatorOptions]),
+}
+
+impl<'a> From<&'a EstimatorOptions> for BatchOptions<'a> {
+    fn from(o: &'a EstimatorOptions) -> Self {
+        BatchOptions::Shared(o)
+    }
+}
+
+impl<'a> From<&'a [EstimatorOptions]> for BatchOptions<'a> {
+    fn from(o: &'a [EstimatorOptions]) -> Self {
+        BatchOptions::PerPair(o)
+    }
+}
+
+impl<'a> From<&'a Vec<EstimatorOptions>> for BatchOptions<'a> {
+    fn from(o: &'a Vec<EstimatorOptions>) -> Self {
+        BatchOptions::PerPair(o)
+    }
+}
+
+impl<'a, const K: usize> From<&'a [EstimatorOptions; K]> for BatchOptions<'a> {
+    fn from(o: &'a [EstimatorOptions; K]) -> Self {
+        BatchOptions::PerPair(o)
+    }
+}
+
+impl BatchOptions<'_> {
+    /// Pair i's options; an error for every pair when a per-pair list has the wrong length.
+    fn get(&self, i: usize, pairs: usize) -> Result<&EstimatorOptions> {
+        match *self {
+            BatchOptions::Shared(o) => Ok(o),
+            BatchOptions::PerPair(list) if list.len() == pairs => Ok(&list[i]),
+            BatchOptions::PerPair(list) => Err(RansacError::InvalidOption {
+                name: "options",
+                value: format!("{} option sets for {pairs} pairs", list.len()),
+                reason: "needs one option set per pair, or one for all",
+            }),
+        }
+    }
+}
+
+/// [`estimate_homography`] over many image pairs in parallel; `opts` is one
+/// [`EstimatorOptions`] for all pairs or a slice with one per pair.
+pub fn estimate_homography_batch<'a>(
     data: &[Correspondences],
-    opts: &EstimatorOptions,
+    opts: impl Into<BatchOptions<'a>>,
 ) -> Vec<Result<Estimate<Mat3>>> {
+    let opts = opts.into();
     data.par_iter()
-        .map(|d| estimate_homography(d, opts))
+        .enumerate()
+        .map(|(i, d)| estimate_homography(d, opts.get(i, data.len())?))
         .collect()
 }
 
-/// [`estimate_fundamental`] over many image pairs in parallel.
-pub fn estimate_fundamental_batch(
+/// [`estimate_fundamental`] over many image pairs in parallel (options as in
+/// [`estimate_homography_batch`]).
+pub fn estimate_fundamental_batch<'a>(
     data: &[Correspondences],
-    opts: &EstimatorOptions,
+    opts: impl Into<BatchOptions<'a>>,
 ) -> Vec<Result<Estimate<Mat3>>> {
+    let opts = opts.into();
     data.par_iter()
-        .map(|d| estimate_fundamental(d, opts))
+        .enumerate()
+        .map(|(i, d)| estimate_fundamental(d, opts.get(i, data.len())?))
         .collect()
 }
 
-/// [`estimate_relative_pose`] over many image pairs (each with its intrinsics) in parallel.
-pub fn estimate_relative_pose_batch(
+/// [`estimate_relative_pose`] over many image pairs (each with its intrinsics) in parallel
+/// (options as in [`estimate_homography_batch`]).
+pub fn estimate_relative_pose_batch<'a>(
     pairs: &[(Correspondences, Intrinsics, Intrinsics)],
-    opts: &EstimatorOptions,
+    opts: impl Into<BatchOptions<'a>>,
 ) -> Vec<Result<Estimate<PoseModel>>> {
+    let opts = opts.into();
     pairs
         .par_iter()
-        .map(|(d, k1, k2)| estimate_relative_pose(d, k1, k2, opts))
+        .enumerate()
+        .map(|(i, (d, k1, k2))| estimate_relative_pose(d, k1, k2, opts.get(i, pairs.len())?))
         .collect()
 }

@@ -4,10 +4,11 @@
 //! Module map (the axes vary independently, as in kornia-rs's `ransac`):
 //! - [`problem`]: the [`Problem`] trait: data, minimal/non-minimal solvers, residuals, refinement.
 //! - [`sampler`]: uniform and PROSAC sampling.
-//! - [`score`]: MSAC (and MAGSAC++) scoring with an exact bail-out.
+//! - [`score`]: MSAC and MAGSAC++ scoring with an exact bail-out.
 //! - [`refine`]: Levenberg–Marquardt with robust losses, used by local optimisation and the
 //!   final refinement.
-//! - [`engine`]: the loop: adaptive termination, local optimisation, final refinement.
+//! - [`engine`]: the loop: adaptive termination, the SPRT, local optimisation, final
+//!   refinement.
 //! - [`options`]: [`RansacOptions`] with documented defaults.
 //! - [`error`]: the typed error, [`RansacError`].
 //! - [`problems`]: homography, fundamental matrix and relative pose, with point or AC samples.
@@ -26,9 +27,9 @@ pub mod score;
 pub use engine::{Estimate, estimate};
 pub use error::{RansacError, Result};
 pub use estimators::{
-    EstimatorOptions, SamplerKind, ScoringKind, estimate_fundamental, estimate_fundamental_batch,
-    estimate_homography, estimate_homography_batch, estimate_relative_pose,
-    estimate_relative_pose_batch,
+    BatchOptions, EstimatorOptions, SamplerKind, ScoringKind, estimate_fundamental,
+    estimate_fundamental_batch, estimate_homography, estimate_homography_batch,
+    estimate_relative_pose, estimate_relative_pose_batch,
 };
 pub use options::RansacOptions;
 pub use problem::Problem;

@@ -20,6 +20,12 @@ pub struct RansacOptions {
     pub lo_iterations: usize,
     /// Polish the final model with the problem's refinement (Levenberg–Marquardt). Default true.
     pub final_refinement: bool,
+    /// Verify hypotheses with Wald's sequential probability ratio test (Chum & Matas 2008):
+    /// data in a seeded random order, a hypothesis rejected as soon as its likelihood ratio of
+    /// "bad" to "good" exceeds the threshold A that minimises the expected run time; ε and δ
+    /// are estimated as the run goes, and the iteration bound accounts for the good hypotheses
+    /// the test rejects (probability ≈ 1/A). Default false.
+    pub sprt: bool,
 }
 
 impl Default for RansacOptions {
@@ -33,6 +39,7 @@ impl Default for RansacOptions {
             local_optimization: true,
             lo_iterations: 10,
             final_refinement: true,
+            sprt: false,
         }
     }
 }

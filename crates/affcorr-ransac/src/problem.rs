@@ -34,6 +34,21 @@ pub trait Problem: Sync {
     /// out.len()` under `model`.
     fn residuals(&self, model: &Self::Model, start: usize, out: &mut [f64]);
 
+    /// Squared residuals of the data `indices` (in any order) under `model`, as
+    /// [`Problem::residuals`] computes them; used by the SPRT, which verifies data in random
+    /// order. The default calls `residuals` once per index.
+    fn residuals_at(&self, model: &Self::Model, indices: &[usize], out: &mut [f64]) {
+        for (o, &i) in out.iter_mut().zip(indices) {
+            self.residuals(model, i, std::slice::from_mut(o));
+        }
+    }
+
+    /// Cost of fitting one minimal sample (all its models) in units of one residual: the SPRT's
+    /// t_M, which sets how eagerly it rejects. Default 200.
+    fn model_cost(&self) -> f64 {
+        200.0
+    }
+
     /// Polishes `model` on `inliers` by minimising Σ `loss`(rᵢ²) of a geometric error within
     /// `max_iterations` Levenberg–Marquardt steps; `None` to keep the model as it is. The
     /// default does nothing.

@@ -6,6 +6,7 @@
 //! [`levenberg_marquardt`] adds the damping: (JᵀWJ + λ·diag(JᵀWJ)) δ = −JᵀW r, accepting a step
 //! only if the cost decreases (then λ /= 10), else λ *= 10.
 
+use crate::score::MagsacTable;
 use nalgebra::{SMatrix, SVector};
 
 /// Normal-equation matrix; a problem with d < 9 degrees of freedom uses the top-left d×d block.
@@ -28,6 +29,12 @@ pub enum Loss {
         /// c².
         scale_sq: f64,
     },
+    /// ρ(s) = τ²·ρ̂(s/τ²), MAGSAC++'s σ-consensus++ loss with largest inlier residual τ
+    /// ([`crate::score::MagsacPlusPlus`]); constant τ² from τ² on.
+    Magsac {
+        /// τ².
+        threshold_sq: f64,
+    },
 }
 
 impl Loss {
@@ -38,6 +45,9 @@ impl Loss {
             Loss::Squared => s,
             Loss::Truncated { threshold_sq } => s.min(threshold_sq),
             Loss::Cauchy { scale_sq } => scale_sq * (s / scale_sq).ln_1p(),
+            Loss::Magsac { threshold_sq } => {
+                threshold_sq * MagsacTable::get().loss(s / threshold_sq)
+            }
         }
     }
 
@@ -48,6 +58,7 @@ impl Loss {
             Loss::Squared => 1.0,
             Loss::Truncated { threshold_sq } => f64::from(u8::from(s < threshold_sq)),
             Loss::Cauchy { scale_sq } => 1.0 / (1.0 + s / scale_sq),
+            Loss::Magsac { threshold_sq } => MagsacTable::get().slope(s / threshold_sq),
         }
     }
 }

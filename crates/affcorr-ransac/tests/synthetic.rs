@@ -215,3 +215,46 @@ fn prosac_and_batch_and_errors() {
     assert!(estimate_homography(&points, &options(1.0, SampleKind::Affine, 0)).is_err());
     assert!(Correspondences::from_ac_rows(&[[f64::NAN; 8]]).is_err());
 }
+
+#[test]
+fn batch_options_per_pair_and_no_model_iterations() {
+    let mut rng = Pcg64::seed_from_u64(15);
+    let scene = PlaneScene::random(&mut rng);
+    let d = make_data(&mut rng, &scene, 1, 300, 0.5, 0.5, 0.02);
+    let per_pair = [
+        options(2.0, SampleKind::Affine, 1),
+        options(2.0, SampleKind::Points, 2),
+    ];
+    let data = [d.data.clone(), d.data.clone()];
+    let batch = affcorr_ransac::estimate_homography_batch(&data, &per_pair);
+    for (b, o) in batch.into_iter().zip(&per_pair) {
+        let single = estimate_homography(&d.data, o).unwrap();
+        let b = b.unwrap();
+        assert_eq!(b.model, single.model);
+        assert_eq!(b.iterations, single.iterations);
+    }
+    // Per-pair seeds differ, so the two pairs ran differently.
+    let [a, b] = &per_pair;
+    assert_ne!(
+        estimate_homography(&d.data, a).unwrap().iterations,
+        estimate_homography(&d.data, b).unwrap().iterations
+    );
+    // A wrong number of option sets is an error for every pair.
+    let wrong = affcorr_ransac::estimate_fundamental_batch(&data, &per_pair[..1]);
+    assert!(wrong.iter().all(|r| matches!(
+        r,
+        Err(affcorr_ransac::RansacError::InvalidOption {
+            name: "options",
+            ..
+        })
+    )));
+
+    // NoModel reports the iterations it ran: identical points make every sample degenerate.
+    let same = Correspondences::from_point_rows(&[[10.0, 20.0, 30.0, 40.0]; 20]).unwrap();
+    let mut o = options(1.0, SampleKind::Points, 0);
+    o.ransac.max_iterations = 37;
+    match estimate_homography(&same, &o) {
+        Err(affcorr_ransac::RansacError::NoModel { iterations }) => assert_eq!(iterations, 37),
+        other => panic!("expected NoModel, got {:?}", other.map(|e| e.num_inliers)),
+    }
+}
