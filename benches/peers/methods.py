@@ -62,17 +62,19 @@ def pose_from_essential(E: np.ndarray, x1n: np.ndarray, x2n: np.ndarray):
 def affcorr_methods():
     import affcorr
 
-    def run(problem, columns):
+    def run(problem, columns, **opts):
         def f(s, thr):
             c = s["corrs"][:, :columns]
             if problem == "homography":
-                H, info = affcorr.estimate_homography(c, threshold=thr)
+                H, info = affcorr.estimate_homography(c, threshold=thr, **opts)
                 out = dict(H=H)
             elif problem == "fundamental":
-                F, info = affcorr.estimate_fundamental(c, threshold=thr)
+                F, info = affcorr.estimate_fundamental(c, threshold=thr, **opts)
                 out = dict(F=F)
             else:
-                pose, info = affcorr.estimate_relative_pose(c, s["K1"], s["K2"], threshold=thr)
+                pose, info = affcorr.estimate_relative_pose(
+                    c, s["K1"], s["K2"], threshold=thr, **opts
+                )
                 out = dict(R=pose.R, t=pose.t)
             if info.num_inliers == 0:
                 return None
@@ -84,6 +86,7 @@ def affcorr_methods():
 
     return {
         "affcorr-AC": lambda p: run(p, 8),
+        "affcorr-AC-magsac": lambda p: run(p, 8, scoring="magsac"),
         "affcorr-points": lambda p: run(p, 4),
     }
 

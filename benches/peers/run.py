@@ -331,13 +331,19 @@ def plots(problem, table, outdir: Path) -> list[str]:
 
 
 def markdown(
-    command, mode, grid, tables, versions, notes, unavailable, pngs, elapsed, generated
+    command, mode, grid, tables, versions, notes, unavailable, pngs, elapsed, generated, load=None
 ) -> str:
     L = [f"# Peer benchmark ({mode})", "", "```", command, "```", ""]
+    load_text = (
+        f" Load average (1, 5, 15 min) at the start {load['start']}, at the end {load['end']}."
+        if load
+        else ""
+    )
     L += [
         f"Generated {generated} in {elapsed:.0f} s on "
         f"{os.cpu_count()} cores (shared; other jobs may have run at the same time, so times are "
-        "indicative). Every method single-threaded, one run per scene, untimed warm-up first.",
+        "indicative). Every method single-threaded, one run per scene, untimed warm-up first."
+        + load_text,
         "",
         f"Scenes: {grid['scenes']} per cell; outlier ratios {grid['ratios']} at N = {BASE_N}; "
         f"N = {grid['ns']} at 50% outliers. Planes seen by two cameras, anisotropic K1 != K2, "
@@ -489,6 +495,9 @@ def main(argv=None) -> int:
         "--quick", action="store_true", help="small grid (3 scenes per cell, N <= 10^4)"
     )
     ap.add_argument("--smoke", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument(
+        "--scenes", type=int, default=None, help="scenes per cell (overrides the grid's)"
+    )
     ap.add_argument("--problems", nargs="*", default=PROBLEMS, choices=PROBLEMS)
     ap.add_argument("--groups", nargs="*", default=list(GROUP_PYTHON), choices=list(GROUP_PYTHON))
     ap.add_argument("--out", type=Path, default=ROOT / "benches/results/peers")
@@ -508,7 +517,10 @@ def main(argv=None) -> int:
         ]
     )
     mode = "smoke" if args.smoke else "quick" if args.quick else "full"
-    grid = GRIDS[mode]
+    grid = dict(GRIDS[mode])
+    if args.scenes is not None:
+        grid["scenes"] = args.scenes
+    load_start = [round(x, 2) for x in os.getloadavg()]
     args.out.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
 
@@ -554,6 +566,8 @@ def main(argv=None) -> int:
     meta = dict(
         command=command,
         mode=mode,
+        grid=grid,
+        load_average=dict(start=load_start, end=[round(x, 2) for x in os.getloadavg()]),
         versions=sorted(versions),
         notes=notes,
         unavailable=unavailable,
@@ -586,7 +600,7 @@ def report(outdir: Path) -> int:
     md = markdown(
         meta["command"],
         meta["mode"],
-        GRIDS[meta["mode"]],
+        meta.get("grid", GRIDS[meta["mode"]]),
         tables,
         set(meta["versions"]),
         meta["notes"],
@@ -594,6 +608,7 @@ def report(outdir: Path) -> int:
         pngs,
         meta["elapsed"],
         meta.get("generated", "?"),
+        meta.get("load_average"),
     )
     (outdir / "summary.md").write_text(md)
     print(md)

@@ -31,9 +31,10 @@ loop with adaptive termination, local optimisation and a final refinement (DESIG
   ``local_optimization`` ``True``     iterated least squares on the inliers of each new best
   ``lo_iterations``      ``10``       most refits in one local optimisation
   ``final_refinement``   ``True``     polish the final model on its inliers
-  ``sprt``               ``False``    verify hypotheses with Wald's SPRT (random order, adaptive
+  ``sprt``               ``True``     verify hypotheses with Wald's SPRT (random order, adaptive
                                       epsilon and delta): far fewer residuals for the same
-                                      result accuracy, slightly more iterations
+                                      accuracy, slightly more iterations; ``False``: verify every
+                                      hypothesis on all data
   ``affine_weight``      ``0.0``      weight of the affine residual in scoring (``(N, 8)``
                                       only; 0: points only); see the Rust problem docs
   ====================== ============ =========================================================

@@ -24,7 +24,9 @@ pub struct RansacOptions {
     /// data in a seeded random order, a hypothesis rejected as soon as its likelihood ratio of
     /// "bad" to "good" exceeds the threshold A that minimises the expected run time; ε and δ
     /// are estimated as the run goes, and the iteration bound accounts for the good hypotheses
-    /// the test rejects (probability ≈ 1/A). Default false.
+    /// the test rejects (probability ≈ 1/A). Default true: over 20 seeded scenes per problem
+    /// and sample kind it finds models as accurate as without it (tests/scoring_sprt.rs) from
+    /// 17–77% of the residuals.
     pub sprt: bool,
 }
 
@@ -39,7 +41,7 @@ impl Default for RansacOptions {
             local_optimization: true,
             lo_iterations: 10,
             final_refinement: true,
-            sprt: false,
+            sprt: true,
         }
     }
 }

@@ -32,6 +32,12 @@ pub struct FundamentalProblem<'a> {
     kind: SampleKind,
     affine_weight: f64,
     threshold: f64,
+    /// Hartley normalisations of the two images (centroid at 0, mean distance √2): the
+    /// refinement parametrises F̃ = T2⁻ᵀ F T1⁻¹, whose singular values are of one order, where
+    /// the pixel F's are not (σ₂/σ₁ ~ 1e-3 makes the rank-2 manifold's charts so curved that
+    /// Levenberg–Marquardt crawls).
+    t1: Mat3,
+    t2: Mat3,
 }
 
 impl<'a> FundamentalProblem<'a> {
@@ -48,7 +54,15 @@ impl<'a> FundamentalProblem<'a> {
             kind,
             affine_weight,
             threshold,
+            t1: hartley(&data.x1),
+            t2: hartley(&data.x2),
         }
+    }
+
+    /// The pixel F of a normalised F̃: T2ᵀ F̃ T1.
+    #[inline]
+    fn to_pixels(&self, f: &Mat3) -> Mat3 {
+        self.t2.transpose() * f * self.t1
     }
 
     /// Whether 3 ACs lie on one plane: the homography of the first two explains the third to
@@ -153,21 +167,21 @@ impl Problem for FundamentalProblem<'_> {
         loss: &Loss,
         max_iterations: usize,
     ) -> Option<Mat3> {
-        let start = RankTwo::new(model)?;
-        Some(
-            levenberg_marquardt(
-                self,
-                &start,
-                inliers,
-                loss,
-                &LmOptions {
-                    max_iterations,
-                    ..Default::default()
-                },
-            )
-            .0
-            .matrix(),
+        let (t1_inv, t2_inv) = (self.t1.try_inverse()?, self.t2.try_inverse()?);
+        let start = RankTwo::new(&(t2_inv.transpose() * model * t1_inv))?;
+        let refined = levenberg_marquardt(
+            self,
+            &start,
+            inliers,
+            loss,
+            &LmOptions {
+                max_iterations,
+                ..Default::default()
+            },
         )
+        .0;
+        let f = self.to_pixels(&refined.matrix());
+        Some(f / f.norm())
     }
 }
 
@@ -225,7 +239,22 @@ impl RankTwo {
     }
 }
 
-/// ∂F/∂a_k = U [e_k]× S Vᵀ, ∂F/∂b_k = −U S [e_k]× Vᵀ (U ← U exp([a]×), V ← V exp([b]×)),
+/// Centroid to 0, mean distance to √2 (identity for degenerate input).
+fn hartley(x: &[Vec2]) -> Mat3 {
+    if x.is_empty() {
+        return Mat3::identity();
+    }
+    let n = x.len() as f64;
+    let c = x.iter().fold(Vec2::zeros(), |a, p| a + p) / n;
+    let d = x.iter().map(|p| (p - c).norm()).sum::<f64>() / n;
+    if !(d > 0.0 && d.is_finite()) {
+        return Mat3::identity();
+    }
+    let s = std::f64::consts::SQRT_2 / d;
+    Mat3::new(s, 0.0, -s * c.x, 0.0, s, -s * c.y, 0.0, 0.0, 1.0)
+}
+
+/// In the normalised frame (F̃, see [`FundamentalProblem`]): ∂F/∂a_k = U [e_k]× S Vᵀ, ∂F/∂b_k = −U S [e_k]× Vᵀ (U ← U exp([a]×), V ← V exp([b]×)),
 /// ∂F/∂σ = U diag(0, 1, 0) Vᵀ; the unit-norm rescaling of F does not change the Sampson error.
 impl LeastSquares for FundamentalProblem<'_> {
     type Model = RankTwo;
@@ -235,7 +264,7 @@ impl LeastSquares for FundamentalProblem<'_> {
     }
 
     fn cost(&self, m: &RankTwo, indices: &[usize], loss: &Loss) -> f64 {
-        epipolar_lm::cost(self.data, &m.f, indices, loss)
+        epipolar_lm::cost(self.data, &self.to_pixels(&m.f), indices, loss)
     }
 
     fn normal_equations(
@@ -256,9 +285,10 @@ impl LeastSquares for FundamentalProblem<'_> {
                 3..=5 => -(u * s * skew(&e[k - 3]) * vt),
                 _ => u * Mat3::from_diagonal(&Vec3::new(0.0, 1.0, 0.0)) * vt,
             };
-            d * scale
+            self.to_pixels(&(d * scale))
         });
-        epipolar_lm::normal_equations(self.data, &m.f, &basis, indices, loss, jtj, jtr)
+        let f = self.to_pixels(&m.f);
+        epipolar_lm::normal_equations(self.data, &f, &basis, indices, loss, jtj, jtr)
     }
 
     fn retract(&self, m: &RankTwo, d: &Vec9) -> RankTwo {
