@@ -54,8 +54,7 @@ def test_plane_pairs_have_exact_ground_truth(texture):
     c = pp.corrs
     assert pp.patch_a.shape == (len(c), 32, 32) and pp.patch_a.dtype == np.float32
     np.testing.assert_allclose(views._apply(pp.H, c[:, :2]), c[:, 2:4], atol=1e-8)
-    np.testing.assert_allclose(numeric_jacobian(pp.H, c[:, :2]).reshape(-1, 4), c[:, 4:],
-                               atol=1e-6)
+    np.testing.assert_allclose(numeric_jacobian(pp.H, c[:, :2]).reshape(-1, 4), c[:, 4:], atol=1e-6)
     # F and H come from the same cameras: every AC satisfies both epipolar constraints.
     assert affcorr.sampson_point(pp.F, c).max() < 1e-16
     assert affcorr.sampson_affine(pp.F, c).max() < 1e-16
@@ -109,7 +108,7 @@ def test_shift_distribution():
     np.testing.assert_allclose(q[0, 2:4].numpy(), [0.75, 0.25])
     np.testing.assert_allclose(q[1, 3:5].numpy(), [0.5, 0.5])
     q = shift_distribution(p, torch.tensor([-2.5, 0.0], dtype=torch.float64), circular=False)
-    np.testing.assert_allclose(q[0, 0].numpy(), 1.0)  # half the mass fell off, renormalised
+    np.testing.assert_allclose(q[0].sum().numpy(), 0.5)  # half the mass fell off the end
 
 
 def test_decoders_on_one_hot_logits():
@@ -127,8 +126,9 @@ def test_synthesize_torch_matches_rust():
     rng = np.random.default_rng(4)
     o = rng.uniform(-math.pi, math.pi, 20)
     s = rng.uniform(0.3, 3, 20)
-    r = np.column_stack([rng.uniform(-0.5, 0.5, 20), rng.normal(0, 0.5, 20),
-                         rng.uniform(-0.5, 0.5, 20)])
+    r = np.column_stack(
+        [rng.uniform(-0.5, 0.5, 20), rng.normal(0, 0.5, 20), rng.uniform(-0.5, 0.5, 20)]
+    )
     got = synthesize_torch(torch.from_numpy(o), torch.from_numpy(s), torch.from_numpy(r))
     np.testing.assert_allclose(got.numpy(), affcorr.synthesize_affine(o, s, r), atol=1e-12)
 

@@ -47,14 +47,17 @@ def similarity_dataset(path: Path, split: str, seed: int = 0) -> dict[str, np.nd
         sp = similarity_pairs(rng, Texture(img), SIMILARITY_PER_TEXTURE[split])
         k = _textured(sp.patch_a, sp.patch_b)
         parts.append((_u8(sp.patch_a[k]), _u8(sp.patch_b[k]), sp.angle[k], sp.scale[k]))
-    out = {name: np.concatenate([p[i] for p in parts])
-           for i, name in enumerate(["patch_a", "patch_b", "angle", "scale"])}
+    out = {
+        name: np.concatenate([p[i] for p in parts])
+        for i, name in enumerate(["patch_a", "patch_b", "angle", "scale"])
+    }
     np.savez(path, **out)
     return out
 
 
-def plane_dataset(path: Path, split: str, seed: int = 0, *, max_tilt_deg: float = 60.0,
-                  centre_jitter: float = 0.5) -> dict[str, np.ndarray]:
+def plane_dataset(
+    path: Path, split: str, seed: int = 0, *, max_tilt_deg: float = 60.0, centre_jitter: float = 0.5
+) -> dict[str, np.ndarray]:
     """E_aff pairs: ``patch_a``, ``patch_b`` uint8, ``corrs`` (N, 8), ``F`` (N, 3, 3) per row."""
     if path.exists():
         return dict(np.load(path))
@@ -65,16 +68,29 @@ def plane_dataset(path: Path, split: str, seed: int = 0, *, max_tilt_deg: float 
         got, tries = 0, 0
         while got < PLANE_PER_TEXTURE[split] and tries < 400:
             tries += 1
-            pp = plane_pairs(rng, tex, PLANE_MATCHES_PER_SCENE, max_tilt_deg=max_tilt_deg,
-                             centre_jitter=centre_jitter)
+            pp = plane_pairs(
+                rng,
+                tex,
+                PLANE_MATCHES_PER_SCENE,
+                max_tilt_deg=max_tilt_deg,
+                centre_jitter=centre_jitter,
+            )
             if pp is None:
                 continue
             k = _textured(pp.patch_a, pp.patch_b)
             n = int(k.sum())
-            parts.append((_u8(pp.patch_a[k]), _u8(pp.patch_b[k]), pp.corrs[k],
-                          np.broadcast_to(pp.F, (n, 3, 3))))
+            parts.append(
+                (
+                    _u8(pp.patch_a[k]),
+                    _u8(pp.patch_b[k]),
+                    pp.corrs[k],
+                    np.broadcast_to(pp.F, (n, 3, 3)),
+                )
+            )
             got += n
-    out = {name: np.concatenate([p[i] for p in parts])
-           for i, name in enumerate(["patch_a", "patch_b", "corrs", "F"])}
+    out = {
+        name: np.concatenate([p[i] for p in parts])
+        for i, name in enumerate(["patch_a", "patch_b", "corrs", "F"])
+    }
     np.savez(path, **out)
     return out

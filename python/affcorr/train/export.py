@@ -24,8 +24,13 @@ from .shape import _load
 from .shape_net import PATCH_SIZE, ShapeNet, angle_bin_centres, scale_bin_centres
 
 CONTRACT = "shape-v1"
-OUTPUT_NAMES = ["angle_logits_a", "angle_logits_b", "scale_logits_a", "scale_logits_b",
-                "residual_shape"]
+OUTPUT_NAMES = [
+    "angle_logits_a",
+    "angle_logits_b",
+    "scale_logits_a",
+    "scale_logits_b",
+    "residual_shape",
+]
 
 
 def metadata(extra: dict[str, str] | None = None) -> dict[str, str]:
@@ -50,8 +55,12 @@ def export(net: ShapeNet, out: Path, extra_metadata: dict[str, str] | None = Non
     x = torch.rand(4, 1, PATCH_SIZE, PATCH_SIZE)
     out.parent.mkdir(parents=True, exist_ok=True)
     torch.onnx.export(
-        net, (x, x.flip(-1)), str(out), opset_version=16,
-        input_names=["patch_a", "patch_b"], output_names=OUTPUT_NAMES,
+        net,
+        (x, x.flip(-1)),
+        str(out),
+        opset_version=16,
+        input_names=["patch_a", "patch_b"],
+        output_names=OUTPUT_NAMES,
         dynamic_axes={name: {0: "n"} for name in ["patch_a", "patch_b", *OUTPUT_NAMES]},
     )
     model = onnx.load(str(out))
@@ -74,11 +83,18 @@ def load_trained(workdir: Path, loss: str, width: int = 8, hidden: int = 128) ->
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(prog="python -m affcorr.train.export", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        prog="python -m affcorr.train.export",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("--workdir", type=Path, help="training directory (omit: untrained weights)")
-    p.add_argument("--loss", default="laff", choices=["laff", "direct", "both", "none"],
-                   help="which E_aff to ship; 'none' keeps A'' = 0 (similarity only)")
+    p.add_argument(
+        "--loss",
+        default="laff",
+        choices=["laff", "direct", "both", "none"],
+        help="which E_aff to ship; 'none' keeps A'' = 0 (similarity only)",
+    )
     p.add_argument("-o", "--output", type=Path, required=True)
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)

@@ -49,7 +49,7 @@ def _patches(u8: np.ndarray, idx: np.ndarray) -> torch.Tensor:
 
 def shift_distribution(p: torch.Tensor, shift_bins: torch.Tensor, circular: bool) -> torch.Tensor:
     """q[k] = p[k - shift] with linear interpolation between bins (fractional shifts); mass
-    shifted past the ends of a non-circular axis is dropped and the rest renormalised."""
+    shifted past the ends of a non-circular axis is dropped (q sums to less than one)."""
     k = p.shape[-1]
     src = torch.arange(k, dtype=p.dtype).unsqueeze(0) - shift_bins.unsqueeze(1)
     lo = torch.floor(src)
@@ -59,22 +59,31 @@ def shift_distribution(p: torch.Tensor, shift_bins: torch.Tensor, circular: bool
     if circular:
         q = (1 - w) * p.gather(1, lo % k) + w * p.gather(1, hi % k)
     else:
+
         def take(i):
             valid = (i >= 0) & (i < k)
             return torch.where(valid, p.gather(1, i.clamp(0, k - 1)), torch.zeros_like(p))
 
         q = (1 - w) * take(lo) + w * take(hi)
-        q = q / q.sum(1, keepdim=True).clamp_min(1e-12)
     return q
 
 
 def covariance_loss(logits_a, logits_b, shift_bins, circular: bool) -> torch.Tensor:
-    """Symmetric probability covariance loss: CE(shift(p_A), p_B) + CE(shift(p_B, -), p_A)."""
+    """Symmetric probability covariance loss: CE(shift(p_A), p_B) + CE(shift(p_B, -), p_A).
+
+    On a non-circular axis (scale) the mass that a shift pushes past either end costs
+    2 log K, the price of a wrong guess: otherwise piling all mass on an end bin would satisfy
+    the covariance trivially (it did, in a first run).
+    """
     pa, pb = torch.softmax(logits_a, 1), torch.softmax(logits_b, 1)
     la, lb = torch.log_softmax(logits_a, 1), torch.log_softmax(logits_b, 1)
     ta = shift_distribution(pa, shift_bins, circular)
     tb = shift_distribution(pb, -shift_bins, circular)
-    return -(ta * lb).sum(1).mean() - (tb * la).sum(1).mean()
+    loss = -(ta * lb).sum(1).mean() - (tb * la).sum(1).mean()
+    if not circular:
+        lost = (1 - ta.sum(1)).mean() + (1 - tb.sum(1)).mean()
+        loss = loss + 2 * math.log(logits_a.shape[1]) * lost
+    return loss
 
 
 ANGLE_BIN_WIDTH = 2 * math.pi / ANGLE_BINS
@@ -96,9 +105,12 @@ def os_errors(net: OrientationScaleNet, data: dict, batch: int = 2048) -> dict[s
             da.append(torch.atan2(torch.sin(d), torch.cos(d)).abs().numpy())
             ds.append((torch.log2(s.double()) - np.log2(data["scale"][idx])).abs().numpy())
     da, ds = np.degrees(np.concatenate(da)), np.concatenate(ds)
-    return {"angle_med_deg": float(np.median(da)), "angle_within_10deg": float(np.mean(da < 10)),
-            "log2_scale_med": float(np.median(ds)),
-            "scale_within_quarter_octave": float(np.mean(ds < 0.25))}
+    return {
+        "angle_med_deg": float(np.median(da)),
+        "angle_within_10deg": float(np.mean(da < 10)),
+        "log2_scale_med": float(np.median(ds)),
+        "scale_within_quarter_octave": float(np.mean(ds < 0.25)),
+    }
 
 
 def _load(path: Path, modules: dict, optimiser) -> int:
@@ -127,8 +139,10 @@ def _log(path: Path, row: dict) -> None:
         if new:
             w.writeheader()
         w.writerow(row)
-    print(" ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()),
-          flush=True)
+    print(
+        " ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in row.items()),
+        flush=True,
+    )
 
 
 def _lr(step: int, steps: int, base: float) -> float:
@@ -150,17 +164,22 @@ def train_os(args) -> None:
     step = _load(ckpt, {"os": net}, opt)
     rng = np.random.default_rng([args.seed, step])
     t_end = time.time() + 60 * args.minutes
-    n = len(train["angle"])
+    # Curriculum: pairs with a large scale change share little content; --max-log2-scale
+    # limits training to the easier ones.
+    pool = np.nonzero(np.abs(np.log2(train["scale"])) <= args.max_log2_scale)[0]
     while step < args.steps and time.time() < t_end:
         net.train()
-        idx = rng.integers(0, n, args.batch)
+        idx = pool[rng.integers(0, len(pool), args.batch)]
         pa, pb = _patches(train["patch_a"], idx), _patches(train["patch_b"], idx)
         angle = torch.from_numpy(train["angle"][idx]).float()
         log2s = torch.from_numpy(np.log2(train["scale"][idx])).float()
         logits, scales = net(torch.cat([pa, pb]))
         b = len(idx)
-        loss = covariance_loss(logits[:b], logits[b:], angle / ANGLE_BIN_WIDTH, True) + \
-            covariance_loss(scales[:b], scales[b:], log2s / LOG2_SCALE_BIN_WIDTH, False)
+        loss = covariance_loss(
+            logits[:b], logits[b:], angle / ANGLE_BIN_WIDTH, True
+        ) + args.scale_weight * covariance_loss(
+            scales[:b], scales[b:], log2s / LOG2_SCALE_BIN_WIDTH, False
+        )
         for g in opt.param_groups:
             g["lr"] = _lr(step, args.steps, args.lr)
         opt.zero_grad()
@@ -202,16 +221,20 @@ def aff_errors(os_net, aff_net, data: dict, batch: int = 2048) -> dict[str, floa
             for pred, f_out, c_out in ((A, fro, cos), (sim, fro_os, cos_os)):
                 d = (pred - gt).flatten(1)
                 f_out.append(d.norm(dim=1).numpy())
-                c_out.append(torch.nn.functional.cosine_similarity(
-                    pred.flatten(1), gt.flatten(1)).numpy())
+                c_out.append(
+                    torch.nn.functional.cosine_similarity(pred.flatten(1), gt.flatten(1)).numpy()
+                )
             corrs = torch.from_numpy(data["corrs"][idx]).clone()
             corrs[:, 4:] = A.flatten(1)
             sda.append(affine_sampson(torch.from_numpy(data["F"][idx]), corrs).sum(1).numpy())
     cat = np.concatenate
-    return {"fro_med": float(np.median(cat(fro))), "cos_mean": float(np.mean(cat(cos))),
-            "fro_med_os_only": float(np.median(cat(fro_os))),
-            "cos_mean_os_only": float(np.mean(cat(cos_os))),
-            "sd_a_med": float(np.median(cat(sda)))}
+    return {
+        "fro_med": float(np.median(cat(fro))),
+        "cos_mean": float(np.mean(cat(cos))),
+        "fro_med_os_only": float(np.median(cat(fro_os))),
+        "cos_mean_os_only": float(np.mean(cat(cos_os))),
+        "sd_a_med": float(np.median(cat(sda))),
+    }
 
 
 def train_aff(args) -> None:
@@ -220,8 +243,10 @@ def train_aff(args) -> None:
     wd = Path(args.workdir)
     train = plane_dataset(wd / "plane_train.npz", "train", args.seed)
     val = plane_dataset(wd / "plane_val.npz", "val", args.seed)
-    print(f"E_aff ({args.loss}): {len(train['corrs'])} training pairs, "
-          f"{len(val['corrs'])} validation pairs")
+    print(
+        f"E_aff ({args.loss}): {len(train['corrs'])} training pairs, "
+        f"{len(val['corrs'])} validation pairs"
+    )
     os_net = OrientationScaleNet(args.width, args.hidden)
     if _load(wd / "os.pt", {"os": os_net}, None) == 0:
         raise SystemExit(f"no trained E_os in {wd}: run the 'os' stage first")
@@ -257,22 +282,40 @@ def train_aff(args) -> None:
         step += 1
         if step % args.save_every == 0 or step == args.steps:
             _save(ckpt, {"aff": aff_net}, opt, step)
-            _log(wd / f"aff_{args.loss}.csv",
-                 {"step": step, "loss": float(loss), **aff_errors(os_net, aff_net, val)})
+            _log(
+                wd / f"aff_{args.loss}.csv",
+                {"step": step, "loss": float(loss), **aff_errors(os_net, aff_net, val)},
+            )
     _save(ckpt, {"aff": aff_net}, opt, step)
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(prog="python -m affcorr.train.shape", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        prog="python -m affcorr.train.shape",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     p.add_argument("stage", choices=["os", "aff"])
     p.add_argument("--workdir", required=True, help="datasets, checkpoints and logs (not git)")
     p.add_argument("--loss", choices=["laff", "direct", "both"], default="laff")
-    p.add_argument("--steps", type=int, default=None,
-                   help="total optimiser steps (the LR schedule's length)")
+    p.add_argument(
+        "--steps", type=int, default=None, help="total optimiser steps (the LR schedule's length)"
+    )
     p.add_argument("--minutes", type=float, default=1e9, help="stop after this wall time")
     p.add_argument("--batch", type=int, default=256)
     p.add_argument("--lr", type=float, default=2e-3)
+    p.add_argument(
+        "--max-log2-scale",
+        type=float,
+        default=2.0,
+        help="E_os: train only on pairs with |log2 S_B/S_A| up to this",
+    )
+    p.add_argument(
+        "--scale-weight",
+        type=float,
+        default=2.0,
+        help="E_os: weight of the scale term against the angle term",
+    )
     p.add_argument("--width", type=int, default=8)
     p.add_argument("--hidden", type=int, default=128)
     p.add_argument("--save-every", type=int, default=500)
@@ -280,7 +323,7 @@ def main(argv=None) -> None:
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
     if args.steps is None:
-        args.steps = 12000 if args.stage == "os" else 4000
+        args.steps = 5000 if args.stage == "os" else 3000
     torch.set_num_threads(args.threads)
     Path(args.workdir).mkdir(parents=True, exist_ok=True)
     (train_os if args.stage == "os" else train_aff)(args)

@@ -44,8 +44,9 @@ def angle_bin_centres() -> torch.Tensor:
 
 def scale_bin_centres() -> torch.Tensor:
     """Centres of the scale bins (linear scale factors), log-spaced on 2^[-3, 3]."""
-    return torch.pow(2.0, torch.linspace(-LOG2_SCALE_RANGE, LOG2_SCALE_RANGE, SCALE_BINS,
-                                         dtype=torch.float64))
+    return torch.pow(
+        2.0, torch.linspace(-LOG2_SCALE_RANGE, LOG2_SCALE_RANGE, SCALE_BINS, dtype=torch.float64)
+    )
 
 
 def normalise_patches(x: torch.Tensor, eps: float = 1e-3) -> torch.Tensor:
@@ -140,8 +141,9 @@ def decode_scale(scale_logits: torch.Tensor) -> torch.Tensor:
     return torch.exp(p @ torch.log(scale_bin_centres().to(p)))
 
 
-def similarity_to_frame_a(patch_b: torch.Tensor, cos_o: torch.Tensor, sin_o: torch.Tensor,
-                          scale: torch.Tensor) -> torch.Tensor:
+def similarity_to_frame_a(
+    patch_b: torch.Tensor, cos_o: torch.Tensor, sin_o: torch.Tensor, scale: torch.Tensor
+) -> torch.Tensor:
     """Resample patch B into patch A's frame under the similarity x2 = S R(O) x1.
 
     Pixel u of the output (offset from the centre) reads patch B at S R(O) u; both patches are
@@ -180,8 +182,9 @@ class ShapeNet(nn.Module):
         return angle_a, angle_b, scale_a, scale_b, residual
 
 
-def synthesize_torch(orientation: torch.Tensor, scale: torch.Tensor,
-                     residual: torch.Tensor) -> torch.Tensor:
+def synthesize_torch(
+    orientation: torch.Tensor, scale: torch.Tensor, residual: torch.Tensor
+) -> torch.Tensor:
     """A = S R(O) A'(A'') as (N, 2, 2), differentiable (DESIGN.md §2; geom's
     ``synthesize_affine`` in torch)."""
     b11, b21, b22 = 1.0 + residual[:, 0], residual[:, 1], 1.0 + residual[:, 2]

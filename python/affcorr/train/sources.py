@@ -20,15 +20,49 @@ from pathlib import Path
 
 import numpy as np
 
-SKIMAGE_TRAIN = ["astronaut.png", "brick.png", "camera.png", "coffee.png", "coins.png",
-                 "grass.png", "hubble_deep_field.jpg", "ihc.png", "moon.png", "page.png",
-                 "retina.jpg", "rocket.jpg", "text.png", "clock_motion.png"]
+SKIMAGE_TRAIN = [
+    "astronaut.png",
+    "brick.png",
+    "camera.png",
+    "coffee.png",
+    "coins.png",
+    "grass.png",
+    "hubble_deep_field.jpg",
+    "ihc.png",
+    "moon.png",
+    "page.png",
+    "retina.jpg",
+    "rocket.jpg",
+    "text.png",
+    "clock_motion.png",
+]
 SKIMAGE_VAL = ["chelsea.png", "gravel.png"]
-OPENCV_TRAIN = ["aero1.jpg", "aloeL.jpg", "apple.jpg", "baboon.jpg", "basketball1.png",
-                "blox.jpg", "board.jpg", "box_in_scene.png", "butterfly.jpg", "fruits.jpg",
-                "HappyFish.jpg", "home.jpg", "lena.jpg", "messi5.jpg", "orange.jpg",
-                "rubberwhale1.png", "squirrel_cls.jpg", "stuff.jpg", "Blender_Suzanne1.jpg",
-                "ela_original.jpg", "sudoku.png", "pic1.png", "pic3.png", "pic5.png"]
+OPENCV_TRAIN = [
+    "aero1.jpg",
+    "aloeL.jpg",
+    "apple.jpg",
+    "baboon.jpg",
+    "basketball1.png",
+    "blox.jpg",
+    "board.jpg",
+    "box_in_scene.png",
+    "butterfly.jpg",
+    "fruits.jpg",
+    "HappyFish.jpg",
+    "home.jpg",
+    "lena.jpg",
+    "messi5.jpg",
+    "orange.jpg",
+    "rubberwhale1.png",
+    "squirrel_cls.jpg",
+    "stuff.jpg",
+    "Blender_Suzanne1.jpg",
+    "ela_original.jpg",
+    "sudoku.png",
+    "pic1.png",
+    "pic3.png",
+    "pic5.png",
+]
 OPENCV_VAL = ["building.jpg", "leuvenA.jpg", "starry_night.jpg", "smarties.png"]
 MIN_SIDE = 200
 
@@ -76,8 +110,9 @@ def textures(split: str) -> list[tuple[str, np.ndarray]]:
     import skimage
 
     sk_root = Path(skimage.__file__).parent / "data"
-    sk_names, cv_names = (SKIMAGE_TRAIN, OPENCV_TRAIN) if split == "train" else (
-        SKIMAGE_VAL, OPENCV_VAL)
+    sk_names, cv_names = (
+        (SKIMAGE_TRAIN, OPENCV_TRAIN) if split == "train" else (SKIMAGE_VAL, OPENCV_VAL)
+    )
     out = [(name, load_image(sk_root / name)) for name in sk_names]
     root = opencv_doc_data()
     out += [(name, load_image(root / name)) for name in cv_names if (root / name).exists()]

@@ -48,8 +48,9 @@ class Texture:
         base = torch.from_numpy(np.ascontiguousarray(image, dtype=np.float32))[None, None]
         self.h, self.w = image.shape
         # Shrinking by m needs a blur of about sigma = 0.5 sqrt(m^2 - 1) texture pixels.
-        self.levels = [_gaussian_blur(base, 0.5 * math.sqrt(max(m * m - 1.0, 0.0)))
-                       for m in _LEVELS]
+        self.levels = [
+            _gaussian_blur(base, 0.5 * math.sqrt(max(m * m - 1.0, 0.0))) for m in _LEVELS
+        ]
 
     def sample(self, coords: np.ndarray, shrink: np.ndarray) -> np.ndarray:
         """Bilinear reads at texture ``coords`` (N, P, P, 2) (x, y); ``shrink`` (N,) is how many
@@ -63,8 +64,9 @@ class Texture:
             g[..., 0] = g[..., 0] / (self.w - 1) * 2 - 1
             g[..., 1] = g[..., 1] / (self.h - 1) * 2 - 1
             g = g.reshape(1, -1, PATCH, 2)
-            s = F.grid_sample(self.levels[lv], g, mode="bilinear", padding_mode="border",
-                              align_corners=True)
+            s = F.grid_sample(
+                self.levels[lv], g, mode="bilinear", padding_mode="border", align_corners=True
+            )
             out[idx] = s.reshape(len(idx), PATCH, PATCH).numpy()
         return out
 
@@ -102,8 +104,14 @@ class SimilarityPairs:
     scale: np.ndarray  # (N,)
 
 
-def similarity_pairs(rng: np.random.Generator, texture: Texture, n: int, *,
-                     max_log2_scale: float = 2.0, shear: float = 0.1) -> SimilarityPairs:
+def similarity_pairs(
+    rng: np.random.Generator,
+    texture: Texture,
+    n: int,
+    *,
+    max_log2_scale: float = 2.0,
+    shear: float = 0.1,
+) -> SimilarityPairs:
     """``n`` pairs from random texture points. Each patch reads the texture through
     ``m R(alpha) (I + small shear)``; the shear (up to ``shear``) makes E_os robust to mild
     affine distortion without changing the labels' meaning much."""
@@ -114,9 +122,9 @@ def similarity_pairs(rng: np.random.Generator, texture: Texture, n: int, *,
     phi = rng.uniform(-math.pi, math.pi, n)
     # x2 = s R(phi) x1 and texture = c + M_i u_i  =>  M_B = M_A R(-phi) / s.
     eps = rng.uniform(-shear, shear, (n, 2, 2))
-    m_a = (2.0 ** log_m_a)[:, None, None] * rotation(alpha) @ (np.eye(2) + eps)
-    m_b = m_a @ rotation(-phi) / (2.0 ** rel)[:, None, None]
-    span = PATCH * np.maximum(2.0 ** log_m_a, 2.0 ** log_m_b) * 1.3
+    m_a = (2.0**log_m_a)[:, None, None] * rotation(alpha) @ (np.eye(2) + eps)
+    m_b = m_a @ rotation(-phi) / (2.0**rel)[:, None, None]
+    span = PATCH * np.maximum(2.0**log_m_a, 2.0**log_m_b) * 1.3
     ok = span < min(texture.w, texture.h) - 4
     cx = span / 2 + 1 + rng.uniform(0, 1, n) * np.maximum(texture.w - span - 2, 0)
     cy = span / 2 + 1 + rng.uniform(0, 1, n) * np.maximum(texture.h - span - 2, 0)
@@ -124,8 +132,12 @@ def similarity_pairs(rng: np.random.Generator, texture: Texture, n: int, *,
     m_a, m_b = m_a[ok], m_b[ok]
     pa = texture.sample(_grid(c, m_a), np.linalg.svd(m_a, compute_uv=False)[:, 0])
     pb = texture.sample(_grid(c, m_b), np.linalg.svd(m_b, compute_uv=False)[:, 0])
-    return SimilarityPairs(_photometric(rng, pa, 0.5), _photometric(rng, pb, 1.0),
-                           np.angle(np.exp(1j * phi[ok])), 2.0 ** rel[ok])
+    return SimilarityPairs(
+        _photometric(rng, pa, 0.5),
+        _photometric(rng, pb, 1.0),
+        np.angle(np.exp(1j * phi[ok])),
+        2.0 ** rel[ok],
+    )
 
 
 @dataclass
@@ -157,8 +169,13 @@ def _look_at(rng, target: np.ndarray, tilt: float, distance: float) -> tuple:
 
 def _intrinsics(rng) -> np.ndarray:
     f = rng.uniform(450, 900)
-    return np.array([[f * rng.uniform(0.95, 1.05), 0, rng.uniform(300, 340)],
-                     [0, f, rng.uniform(220, 260)], [0, 0, 1.0]])
+    return np.array(
+        [
+            [f * rng.uniform(0.95, 1.05), 0, rng.uniform(300, 340)],
+            [0, f, rng.uniform(220, 260)],
+            [0, 0, 1.0],
+        ]
+    )
 
 
 def _texture_to_view(K: np.ndarray, R: np.ndarray, C: np.ndarray) -> np.ndarray:
@@ -180,9 +197,15 @@ def _local_shrink(Hinv: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.linalg.svd(J, compute_uv=False)[:, 0]
 
 
-def plane_pairs(rng: np.random.Generator, texture: Texture, n: int, *,
-                max_tilt_deg: float = 60.0, max_scale_ratio: float = 4.0,
-                centre_jitter: float = 0.0) -> PlanePairs | None:
+def plane_pairs(
+    rng: np.random.Generator,
+    texture: Texture,
+    n: int,
+    *,
+    max_tilt_deg: float = 60.0,
+    max_scale_ratio: float = 4.0,
+    centre_jitter: float = 0.0,
+) -> PlanePairs | None:
     """Up to ``n`` matches of one random two-view plane scene (None if the draw is unusable).
 
     View 1 looks at the texture with a tilt up to 30 deg at 0.7-1.4 view pixels per texture
@@ -191,8 +214,13 @@ def plane_pairs(rng: np.random.Generator, texture: Texture, n: int, *,
     the exact x2, as matcher noise does; the ground truth stays exact.
     """
     K1, K2 = _intrinsics(rng), _intrinsics(rng)
-    target = np.array([texture.w / 2 + rng.uniform(-0.2, 0.2) * texture.w,
-                       texture.h / 2 + rng.uniform(-0.2, 0.2) * texture.h, 0.0])
+    target = np.array(
+        [
+            texture.w / 2 + rng.uniform(-0.2, 0.2) * texture.w,
+            texture.h / 2 + rng.uniform(-0.2, 0.2) * texture.h,
+            0.0,
+        ]
+    )
     s1 = 2.0 ** rng.uniform(-0.5, 0.5)
     s2 = s1 * max_scale_ratio ** rng.uniform(-1, 1)
     s2 = min(max(s2, 0.25), 2.0)
@@ -222,8 +250,14 @@ def plane_pairs(rng: np.random.Generator, texture: Texture, n: int, *,
     eye = np.broadcast_to(np.eye(2), (len(x1), 2, 2))
     g1 = _apply(G1i, _grid(x1, eye).reshape(-1, 2)).reshape(-1, PATCH, PATCH, 2)
     g2 = _apply(G2i, _grid(x2c, eye).reshape(-1, 2)).reshape(-1, PATCH, PATCH, 2)
-    inside = lambda g: ((g[..., 0] >= 0) & (g[..., 0] <= texture.w - 1) &  # noqa: E731
-                        (g[..., 1] >= 0) & (g[..., 1] <= texture.h - 1)).all(axis=(1, 2))
+    def inside(g):
+        return (
+            (g[..., 0] >= 0)
+            & (g[..., 0] <= texture.w - 1)
+            & (g[..., 1] >= 0)
+            & (g[..., 1] <= texture.h - 1)
+        ).all(axis=(1, 2))
+
     keep = np.nonzero(inside(g1) & inside(g2))[0][:n]
     if len(keep) == 0:
         return None
@@ -237,8 +271,14 @@ def plane_pairs(rng: np.random.Generator, texture: Texture, n: int, *,
     return PlanePairs(_photometric(rng, pa, 0.5), _photometric(rng, pb, 1.0), corrs, Fm, H)
 
 
-def render_plane_views(rng: np.random.Generator, image: np.ndarray, *, size=(640, 480),
-                       max_tilt_deg: float = 60.0, max_scale_ratio: float = 4.0):
+def render_plane_views(
+    rng: np.random.Generator,
+    image: np.ndarray,
+    *,
+    size=(640, 480),
+    max_tilt_deg: float = 60.0,
+    max_scale_ratio: float = 4.0,
+):
     """Two full views (H, W) float32 of ``image`` on a plane, as :func:`plane_pairs` draws them,
     and the ground-truth homography view 1 -> view 2. Outside the texture is black. For
     evaluating detectors and matchers on held-out textures."""
@@ -258,13 +298,18 @@ def render_plane_views(rng: np.random.Generator, image: np.ndarray, *, size=(640
         pts = np.stack([xs.ravel(), ys.ravel()], -1)
         Gi = np.linalg.inv(G)
         t = _apply(Gi, pts)
-        shrink = float(np.median(_local_shrink(Gi, pts[:: 97])))
+        shrink = float(np.median(_local_shrink(Gi, pts[::97])))
         lv = int(np.clip(np.searchsorted(_LEVELS, shrink), 0, len(_LEVELS) - 1))
         g = torch.from_numpy(t).float()
         g[:, 0] = g[:, 0] / (tex.w - 1) * 2 - 1
         g[:, 1] = g[:, 1] / (tex.h - 1) * 2 - 1
-        img = F.grid_sample(tex.levels[lv], g.view(1, h, w, 2), mode="bilinear",
-                            padding_mode="zeros", align_corners=True)[0, 0].numpy()
+        img = F.grid_sample(
+            tex.levels[lv],
+            g.view(1, h, w, 2),
+            mode="bilinear",
+            padding_mode="zeros",
+            align_corners=True,
+        )[0, 0].numpy()
         views.append((img, G))
     H = views[1][1] @ np.linalg.inv(views[0][1])
     return views[0][0], views[1][0], H / H[2, 2]
