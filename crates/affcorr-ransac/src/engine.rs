@@ -563,6 +563,9 @@ const LO_SCHEDULE: [f64; 5] = [8.0, 4.0, 2.0, 1.4, 1.0];
 /// local optimisation, even if its score at the threshold is not the best.
 const LO_TRIGGER_SCALE: f64 = 3.0;
 
+/// Least relative score gain of a local-optimisation step past [`LO_SCHEDULE`] to go on.
+const LO_MIN_GAIN: f64 = 0.005;
+
 /// Levenberg–Marquardt steps per refinement inside local optimisation: enough to leave a rough
 /// minimal model's basin (near-planar scenes make the cost a narrow valley), cheap enough to run
 /// at every schedule step.
@@ -591,9 +594,11 @@ fn thin_out(indices: &mut Vec<usize>, weights: &mut Vec<f64>, max: usize) {
 }
 
 /// Iterated least squares on the inliers at shrinking thresholds, then at the true threshold
-/// while the score improves. Each step starts from the best model so far, collects its inliers
-/// at the step's threshold, and tries two candidates: the linear fit on them and the nonlinear
-/// refinement of the best model on them (robust to the outliers a wide threshold lets in).
+/// while the score improves by more than [`LO_MIN_GAIN`]. Each step starts from the best model
+/// so far, collects its inliers at the step's threshold, and tries two candidates: the linear
+/// fit on them and the nonlinear refinement of the best model on them (robust to the outliers a
+/// wide threshold lets in). (Dropping the linear fit after the first step saves 15% of a
+/// relative-pose run but costs 15% of its median rotation accuracy.)
 /// Every candidate is scored at the true threshold.
 fn local_optimization<P: Problem, S: Scoring>(
     problem: &P,
@@ -627,7 +632,7 @@ fn local_optimization<P: Problem, S: Scoring>(
             LO_LM_ITERATIONS,
         );
         let linear = problem.fit_nonminimal(indices, Some(weights));
-        let mut improved = false;
+        let start_score = best.score;
         for model in refined.into_iter().chain(linear) {
             if let Some(e) = score_model(problem, scoring, &model, best.score, usize::MAX, scratch)
                 && e.score > best.score
@@ -638,11 +643,12 @@ fn local_optimization<P: Problem, S: Scoring>(
                     inliers: e.inliers,
                     wide_support: e.wide_support,
                 };
-                improved = true;
             }
         }
-        // Past the schedule, stop at the first step that does not improve.
-        if !improved && step + 1 >= LO_SCHEDULE.len() {
+        // Past the schedule, stop at the first step that does not improve the score by
+        // LO_MIN_GAIN: a model crawling up a long valley (typically a wrong one) is not worth
+        // more refits.
+        if step + 1 >= LO_SCHEDULE.len() && best.score <= start_score * (1.0 + LO_MIN_GAIN) {
             break;
         }
     }
