@@ -6,6 +6,7 @@
 //! - [`sampson`]: Sampson distances and their gradients.
 //! - [`solvers`]: minimal and non-minimal solvers.
 //! - [`runner`]: the shape network, patch extraction and image decoding (ONNX Runtime).
+//! - [`pipeline`]: the end-to-end pipeline: images → matches (XFeat) → ACs.
 //!
 //! Every function validates its inputs here or in Rust and raises `ValueError` naming the bad
 //! argument; no Rust panic can cross this boundary because the core crates return `Result`s.
@@ -15,6 +16,7 @@ use pyo3::prelude::*;
 
 mod arrays;
 mod geom;
+mod pipeline;
 mod ransac;
 mod runner;
 mod sampson;
@@ -24,6 +26,7 @@ mod solvers;
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     geom::register(m)?;
+    pipeline::register(m)?;
     ransac::register(m)?;
     runner::register(m)?;
     sampson::register(m)?;

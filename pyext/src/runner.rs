@@ -42,7 +42,7 @@ const PATCH_LEN: usize = 32 * 32;
 
 /// Maps a runner error to the Python exception its kind calls for; `what` (an argument name)
 /// prefixes messages that do not start with it already.
-fn py_error(e: RunnerError, what: Option<&str>) -> PyErr {
+pub(crate) fn py_error(e: RunnerError, what: Option<&str>) -> PyErr {
     let text = e.to_string();
     let msg = match what {
         Some(w) if !text.starts_with(w) => format!("{w}: {text}"),
@@ -64,7 +64,11 @@ fn py_error(e: RunnerError, what: Option<&str>) -> PyErr {
 }
 
 /// An image argument: a path, or a numpy array of uint8 / uint16 / float.
-fn gray_image(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<GrayImage> {
+pub(crate) fn gray_image(
+    py: Python<'_>,
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+) -> PyResult<GrayImage> {
     let Ok(array) = obj.cast::<PyUntypedArray>() else {
         let path: PathBuf = obj.extract().map_err(|_| {
             PyValueError::new_err(format!(

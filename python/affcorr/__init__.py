@@ -11,7 +11,8 @@ map ``A = dx2/dx1`` between the two images. Conventions (see DESIGN.md §2):
 Every function raises ``ValueError`` naming the bad argument.
 
 ``ShapeEstimator`` runs the shape network (ONNX Runtime, from the ``onnxruntime`` wheel) to turn
-two images and matched points into ACs.
+two images and matched points into ACs; ``Pipeline`` runs the whole chain: two images → XFeat
+matches (mutual nearest neighbours, XFeat* or LighterGlue) → ACs → homography or relative pose.
 """
 
 from ._native import (
@@ -56,6 +57,7 @@ from .estimation import (
     estimate_relative_pose,
     estimate_relative_pose_batch,
 )
+from .pipeline import MatchResult, Pipeline
 from .shape import ShapeEstimate, ShapeEstimator, extract_patches, read_gray_image
 
 __all__ = [
@@ -69,6 +71,8 @@ __all__ = [
     "estimate_homography_batch",
     "estimate_relative_pose",
     "estimate_relative_pose_batch",
+    "MatchResult",
+    "Pipeline",
     "ShapeEstimate",
     "ShapeEstimator",
     "extract_patches",

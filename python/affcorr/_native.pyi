@@ -283,3 +283,49 @@ def extract_patches(image: Any, xy: ArrayLike) -> NDArray[np.float32]:
 
 def read_gray_image(image: Any) -> NDArray[np.float32]:
     """(H, W) float32 gray in [0, 1]; colour is 0.299 R + 0.587 G + 0.114 B, alpha ignored."""
+
+# --- end-to-end pipeline (issue 6; wrapped by affcorr.pipeline) ----------------------------
+
+class PipelineRunner:
+    """Matcher (XFeat backbone + MNN / XFeat* refinement / LighterGlue) and shape network in
+    Rust (use ``affcorr.Pipeline``). Every model's contract is checked on loading.
+    Raises ValueError (unknown matcher, option < 1, descriptor sizes that disagree),
+    FileNotFoundError (no such model), RuntimeError (contract violation, ONNX Runtime)."""
+
+    def __init__(
+        self,
+        *,
+        matcher: str,
+        backbone_model: str | os.PathLike[str],
+        shape_model: str | os.PathLike[str],
+        refine_model: str | os.PathLike[str] | None = None,
+        lighterglue_model: str | os.PathLike[str] | None = None,
+        ort_library: str | os.PathLike[str] | None = None,
+        max_keypoints: int | None = None,
+        max_matches: int | None = None,
+        max_side: int | None = None,
+        threads: int | None = None,
+    ) -> None: ...
+    def match_pair(
+        self, image_a: Any, image_b: Any
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]:
+        """Images (path or array) -> (corrs (N, 8), certainty (N,), timings {stage: seconds},
+        (keypoints in A, keypoints in B)); GIL released."""
+    def match_pairs(
+        self, pairs: Sequence[tuple[Any, Any]]
+    ) -> list[
+        tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]
+    ]:
+        """match_pair over the pairs, one after the other; errors name pairs[i]."""
+    @property
+    def matcher(self) -> str: ...
+    @property
+    def max_keypoints(self) -> int: ...
+    @property
+    def max_matches(self) -> int | None: ...
+    @property
+    def max_side(self) -> int | None: ...
+    @property
+    def threads(self) -> int: ...
+    @property
+    def backbone_metadata(self) -> dict[str, str]: ...

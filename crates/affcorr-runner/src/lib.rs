@@ -8,6 +8,12 @@
 //! - [`shape`]: the shape network's ONNX contract (`shape-v1`), batched inference and the
 //!   softmax-mean decoding of its orientation and scale logits.
 //! - [`estimator`]: the ACs A = S_AB · R(O_AB) · A′(A″) of matched points.
+//! - [`features`]: the XFeat backbone (`features-backbone-v1`) and sparse / semi-dense feature
+//!   extraction from its maps (the specification is `python/affcorr/export/xfeat_reference.py`).
+//! - [`matching`]: mutual nearest neighbours, the XFeat* refinement model and LighterGlue.
+//! - [`contract`]: the matcher models' ONNX contracts (docs/matchers.md), checked on loading.
+//! - [`pipeline`]: [`Pipeline`]: images → matches → ACs → homography / relative pose, timed per
+//!   stage.
 //! - [`error`]: [`RunnerError`], which names what went wrong.
 //!
 //! Conventions are DESIGN.md §2's: pixels (x, y) with x right and y down, pixel centres at
@@ -29,11 +35,15 @@
 //! # Ok::<(), affcorr_runner::RunnerError>(())
 //! ```
 
+pub mod contract;
 pub mod error;
 pub mod estimator;
+pub mod features;
 pub mod image;
+pub mod matching;
 pub mod ort_env;
 pub mod patches;
+pub mod pipeline;
 pub mod shape;
 
 pub use error::{Result, RunnerError};
@@ -42,3 +52,9 @@ pub use image::{GrayImage, PixelData};
 pub use ort_env::{init_ort, ort_library};
 pub use patches::{PATCH_SIZE, Patches, extract_patches};
 pub use shape::{ShapeBins, ShapeModel, ShapeModelOptions, ShapeOutputs, ShapePrediction};
+
+pub use features::{Backbone, BackboneConfig, BackboneMaps, DenseFeatures, SparseFeatures};
+pub use matching::{GlueMatches, LighterGlue, MnnMatches, RefineModel, mutual_nearest_neighbours};
+pub use pipeline::{
+    Estimated, ImageSource, Matcher, Matches, Pipeline, PipelineBuilder, PipelineError, Timings,
+};

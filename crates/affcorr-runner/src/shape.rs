@@ -465,6 +465,10 @@ fn builder(threads: usize) -> Result<SessionBuilder> {
         .with_intra_threads(threads)
         .map_err(|e| RunnerError::ort(context, e))?
         .with_inter_threads(1)
+        .map_err(|e| RunnerError::ort(context, e))?
+        // Idle workers block instead of spinning, so that they leave the cores to the other
+        // sessions of a pipeline (see crate::contract::load).
+        .with_intra_op_spinning(false)
         .map_err(|e| RunnerError::ort(context, e))
 }
 

@@ -4,8 +4,11 @@
 //! - [`geom`]: conventions, AC synthesis/decomposition, Sampson distances, epipolar utilities.
 //! - [`solvers`]: minimal and non-minimal solvers.
 //! - [`ransac`]: robust estimation of H, F and relative pose from points or ACs.
-//! - [`runner`]: ONNX Runtime runner: image decoding, 32×32 patch extraction and the shape
-//!   network (images + matches → ACs `A = S_AB·R(O_AB)·A′(A″)`); the matchers are not yet in it.
+//! - [`runner`]: ONNX Runtime runner: image decoding, the XFeat matchers (MNN, XFeat*,
+//!   LighterGlue), 32×32 patch extraction and the shape network (images + matches → ACs
+//!   `A = S_AB·R(O_AB)·A′(A″)`).
+//! - [`Pipeline`]: images → matches → ACs → homography / relative pose, timed per stage
+//!   (re-exported from [`runner::pipeline`]).
 //!
 //! ```
 //! use affcorr::geom::{affine::{AffineShape, synthesize, decompose}};
@@ -18,3 +21,7 @@ pub use affcorr_geom as geom;
 pub use affcorr_ransac as ransac;
 pub use affcorr_runner as runner;
 pub use affcorr_solvers as solvers;
+
+pub use affcorr_runner::pipeline::{
+    Estimated, ImageSource, Matcher, Matches, Pipeline, PipelineBuilder, PipelineError, Timings,
+};

@@ -1,0 +1,248 @@
+//! Bindings of the end-to-end pipeline (`affcorr::runner::Pipeline`): images → matches → ACs.
+//! The Python package (`affcorr.pipeline`) wraps [`PipelineRunner`] into `affcorr.Pipeline`,
+//! which finds the bundled models and adds the robust estimation (`affcorr.estimate_*`).
+//!
+//! - Images are file paths (decoded in Rust, timed as `decode`) or numpy arrays (as
+//!   `affcorr.ShapeEstimator` takes them; the conversion is timed as `decode`).
+//! - Errors follow `runner.rs`: bad arguments and images raise `ValueError`, missing files
+//!   `FileNotFoundError`, model problems (contracts, ONNX Runtime) `RuntimeError`.
+//! - Matching runs with the GIL released.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use crate::arrays::{flatten, to_numpy};
+use crate::runner::{gray_image, py_error};
+use affcorr::runner::{GrayImage, ImageSource, Matcher, Matches, Pipeline, init_ort as init};
+use numpy::PyUntypedArray;
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList, PyTuple};
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<PipelineRunner>()?;
+    Ok(())
+}
+
+/// An image argument, ready for the pipeline.
+enum ImageArg {
+    Path(PathBuf),
+    Image(GrayImage),
+}
+
+impl ImageArg {
+    fn source(&self) -> ImageSource<'_> {
+        match self {
+            Self::Path(p) => ImageSource::Path(p),
+            Self::Image(img) => ImageSource::Image(img),
+        }
+    }
+}
+
+/// A path stays a path (the pipeline decodes it); an array is converted here. Returns the
+/// conversion time.
+fn image_arg(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(ImageArg, Duration)> {
+    let t = Instant::now();
+    if obj.cast::<PyUntypedArray>().is_err()
+        && let Ok(path) = obj.extract::<PathBuf>()
+    {
+        return Ok((ImageArg::Path(path), Duration::ZERO));
+    }
+    let img = gray_image(py, obj, name)?;
+    Ok((ImageArg::Image(img), t.elapsed()))
+}
+
+type MatchTuple<'py> = (
+    Bound<'py, PyAny>,
+    Bound<'py, PyAny>,
+    Bound<'py, PyDict>,
+    (usize, usize),
+);
+
+/// `(corrs (N, 8), certainty (N,), timings {stage: seconds}, (keypoints A, keypoints B))`.
+fn match_tuple<'py>(
+    py: Python<'py>,
+    m: Matches,
+    extra_decode: Duration,
+) -> PyResult<MatchTuple<'py>> {
+    let n = m.corrs.len();
+    let mut timings = m.timings;
+    timings.decode += extra_decode;
+    timings.total += extra_decode;
+    let d = PyDict::new(py);
+    for (name, v) in timings.stages() {
+        d.set_item(name, v.as_secs_f64())?;
+    }
+    Ok((
+        to_numpy(py, &[n, 8], flatten(m.corrs))?.into_any(),
+        to_numpy(py, &[n], m.certainty)?.into_any(),
+        d,
+        m.num_keypoints,
+    ))
+}
+
+/// The pipeline with its models; see `affcorr.Pipeline` for the documentation.
+#[pyclass(name = "PipelineRunner", module = "affcorr._native", frozen)]
+pub struct PipelineRunner {
+    inner: Pipeline,
+}
+
+#[pymethods]
+impl PipelineRunner {
+    #[new]
+    #[pyo3(signature = (
+        *, matcher, backbone_model, shape_model, refine_model = None, lighterglue_model = None,
+        ort_library = None, max_keypoints = None, max_matches = None, max_side = None,
+        threads = None
+    ))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        py: Python<'_>,
+        matcher: &str,
+        backbone_model: PathBuf,
+        shape_model: PathBuf,
+        refine_model: Option<PathBuf>,
+        lighterglue_model: Option<PathBuf>,
+        ort_library: Option<PathBuf>,
+        max_keypoints: Option<usize>,
+        max_matches: Option<usize>,
+        max_side: Option<usize>,
+        threads: Option<usize>,
+    ) -> PyResult<Self> {
+        let matcher: Matcher = matcher.parse().map_err(|e| py_error(e, None))?;
+        let mut b = Pipeline::builder()
+            .matcher(matcher)
+            .backbone_model(backbone_model)
+            .shape_model(shape_model);
+        if let Some(p) = refine_model {
+            b = b.refine_model(p);
+        }
+        if let Some(p) = lighterglue_model {
+            b = b.lighterglue_model(p);
+        }
+        if let Some(n) = max_keypoints {
+            b = b.max_keypoints(n);
+        }
+        if let Some(n) = max_matches {
+            b = b.max_matches(n);
+        }
+        if let Some(n) = max_side {
+            b = b.max_side(n);
+        }
+        if let Some(n) = threads {
+            b = b.threads(n);
+        }
+        py.detach(|| {
+            init(ort_library.as_deref())?;
+            b.build()
+        })
+        .map(|inner| Self { inner })
+        .map_err(|e| py_error(e, None))
+    }
+
+    /// ACs of one pair: `(corrs, certainty, timings, num_keypoints)`.
+    fn match_pair<'py>(
+        &self,
+        py: Python<'py>,
+        image_a: &Bound<'py, PyAny>,
+        image_b: &Bound<'py, PyAny>,
+    ) -> PyResult<MatchTuple<'py>> {
+        let (a, ta) = image_arg(py, image_a, "image_a")?;
+        let (b, tb) = image_arg(py, image_b, "image_b")?;
+        let m = py
+            .detach(|| self.inner.match_pair(a.source(), b.source()))
+            .map_err(|e| py_error(e, None))?;
+        match_tuple(py, m, ta + tb)
+    }
+
+    /// ACs of many pairs (a sequence of `(image_a, image_b)`), one after the other with every
+    /// thread; the first failing pair raises, naming its index.
+    fn match_pairs<'py>(
+        &self,
+        py: Python<'py>,
+        pairs: &Bound<'py, PyAny>,
+    ) -> PyResult<Bound<'py, PyList>> {
+        let items: Vec<Bound<'py, PyAny>> = pairs
+            .try_iter()
+            .map_err(|_| PyValueError::new_err("pairs must be a sequence of (image_a, image_b)"))?
+            .collect::<PyResult<_>>()?;
+        let mut args = Vec::with_capacity(items.len());
+        for (i, item) in items.iter().enumerate() {
+            let pair = item
+                .cast::<PyTuple>()
+                .ok()
+                .filter(|t| t.len() == 2)
+                .map(|t| (t.get_item(0), t.get_item(1)))
+                .or_else(|| {
+                    let l = item.cast::<PyList>().ok().filter(|l| l.len() == 2)?;
+                    Some((l.get_item(0), l.get_item(1)))
+                });
+            let Some((Ok(a), Ok(b))) = pair else {
+                return Err(PyValueError::new_err(format!(
+                    "pairs[{i}] must be a pair (image_a, image_b)"
+                )));
+            };
+            let prefix = |e: PyErr| prefix_error(py, i, e);
+            let (a, ta) = image_arg(py, &a, "image_a").map_err(prefix)?;
+            let (b, tb) = image_arg(py, &b, "image_b").map_err(prefix)?;
+            args.push((a, b, ta + tb));
+        }
+        let results: Vec<_> = py.detach(|| {
+            self.inner
+                .match_pairs(args.iter().map(|(a, b, _)| (a.source(), b.source())))
+        });
+        let mut out = Vec::with_capacity(results.len());
+        for (i, (r, (_, _, t))) in results.into_iter().zip(&args).enumerate() {
+            let m = r.map_err(|e| prefix_error(py, i, py_error(e, None)))?;
+            out.push(match_tuple(py, m, *t)?);
+        }
+        PyList::new(py, out)
+    }
+
+    /// `"xfeat"`, `"xfeat-star"` or `"xfeat-lighterglue"`.
+    #[getter]
+    fn matcher(&self) -> &'static str {
+        self.inner.matcher().name()
+    }
+
+    /// Keypoints (or semi-dense cells) per image.
+    #[getter]
+    fn max_keypoints(&self) -> usize {
+        self.inner.max_keypoints()
+    }
+
+    /// The cap on matches, or None.
+    #[getter]
+    fn max_matches(&self) -> Option<usize> {
+        self.inner.max_matches()
+    }
+
+    /// The working resolution's longest side, or None.
+    #[getter]
+    fn max_side(&self) -> Option<usize> {
+        self.inner.max_side()
+    }
+
+    /// ONNX Runtime intra-op threads and Rust threads.
+    #[getter]
+    fn threads(&self) -> usize {
+        self.inner.threads()
+    }
+
+    /// The backbone's custom metadata.
+    #[getter]
+    fn backbone_metadata<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let d = PyDict::new(py);
+        for (k, v) in self.inner.backbone().metadata() {
+            d.set_item(k, v)?;
+        }
+        Ok(d)
+    }
+}
+
+/// The same exception type, its message prefixed with `pairs[i]: `.
+fn prefix_error(py: Python<'_>, i: usize, e: PyErr) -> PyErr {
+    let msg = format!("pairs[{i}]: {}", e.value(py));
+    let ty = e.get_type(py);
+    PyErr::from_type(ty, msg)
+}

@@ -1,0 +1,325 @@
+"""The end-to-end pipeline: two images in, affine correspondences (and H or a pose) out.
+
+``affcorr.Pipeline`` runs in Rust through ONNX Runtime, with the GIL released:
+
+1. **decode**: files are decoded (PNG, JPEG) to gray; arrays are taken as
+   :func:`affcorr.read_gray_image` takes them. With ``max_side``, an image whose longer side
+   exceeds it is downscaled (antialiased) to that working resolution.
+2. **matcher**: the XFeat backbone (``models/xfeat_backbone.onnx``; twice per image for XFeat*).
+3. **detection** and **matching**: sparse keypoints + mutual nearest neighbours (``"xfeat"``),
+   semi-dense cells + mutual nearest neighbours + sub-pixel refinement (``"xfeat-star"``,
+   ``models/xfeat_refine.onnx``), or sparse keypoints + LighterGlue (``"xfeat-lighterglue"``,
+   ``models/xfeat_lighterglue.onnx``). The post-processing follows
+   ``affcorr.export.xfeat_reference`` (docs/matchers.md).
+4. **patches** and **shape_net**: 32x32 patches around the matched points and the shape network's
+   affine map ``A = dx2/dx1`` at each (``models/shape.onnx``, see :class:`affcorr.ShapeEstimator`).
+
+Results are in the original images' pixels, sorted by decreasing certainty (MNN: cosine
+similarity of the descriptors; XFeat*: refinement confidence; LighterGlue: match score).
+:meth:`Pipeline.homography` and :meth:`Pipeline.relative_pose` add the robust estimation of
+:func:`affcorr.estimate_homography` / :func:`affcorr.estimate_relative_pose` on the ACs, with the
+same options and return types (``ransac`` in the timings).
+
+Errors: bad arguments and undecodable images raise ``ValueError``; missing image or model files
+``FileNotFoundError``; models that break their ONNX contract and ONNX Runtime problems
+``RuntimeError``.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Union
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from . import _native
+from .estimation import RansacInfo, RelativePose, estimate_homography, estimate_relative_pose
+from .shape import bundled_shape_model, find_ort_library
+
+__all__ = ["MATCHERS", "MatchResult", "Pipeline", "bundled_models_dir"]
+
+#: The matcher names :class:`Pipeline` takes.
+MATCHERS: tuple[str, ...] = ("xfeat-lighterglue", "xfeat", "xfeat-star")
+
+#: An image: a PNG/JPEG file path, or an array (H, W) / (H, W, C), C in 1..4, of dtype uint8
+#: (divided by 255), uint16 (divided by 65535) or float (values in [0, 1]).
+ImageLike = Union[str, "os.PathLike[str]", np.ndarray]
+
+_FILES = {
+    "backbone": "xfeat_backbone.onnx",
+    "refine": "xfeat_refine.onnx",
+    "lighterglue": "xfeat_lighterglue.onnx",
+}
+
+
+def bundled_models_dir() -> Path:
+    """The models shipped in the package (``affcorr/models``)."""
+    return Path(__file__).resolve().parent / "models"
+
+
+@dataclass(frozen=True, eq=False)
+class MatchResult:
+    """The ACs of one image pair.
+
+    Attributes:
+        corrs: ``(N, 8)`` float64 rows ``[x1, y1, x2, y2, a11, a12, a21, a22]``, ``A = dx2/dx1``,
+            in the original images' pixels, most certain first.
+        certainty: ``(N,)`` the matcher's certainty of each match (higher is better).
+        timings: seconds per stage: ``decode``, ``matcher``, ``detection``, ``matching``,
+            ``patches``, ``shape_net``, ``ransac`` (0 unless estimated), ``total``.
+        num_keypoints: keypoints (or semi-dense cells) found in image A and in image B.
+    """
+
+    corrs: NDArray[np.float64]
+    certainty: NDArray[np.float64]
+    timings: dict[str, float]
+    num_keypoints: tuple[int, int]
+
+    def __len__(self) -> int:
+        return len(self.corrs)
+
+    def __repr__(self) -> str:
+        return (
+            f"MatchResult({len(self)} ACs, keypoints {self.num_keypoints}, "
+            f"total {1e3 * self.timings.get('total', 0.0):.1f} ms)"
+        )
+
+
+def _positive(value: Any, name: str, *, optional: bool = True) -> int | None:
+    if value is None and optional:
+        return None
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        what = "a positive int" + (" or None" if optional else "")
+        raise ValueError(f"{name} must be {what}, got {value!r}")
+    return int(value)
+
+
+class Pipeline:
+    """Images in, affine correspondences out (matcher + shape network), plus H or pose.
+
+    Args:
+        matcher: ``"xfeat-lighterglue"`` (XFeat keypoints matched by LighterGlue: the most
+            correct matches, but its cost grows with ``max_keypoints`` squared), ``"xfeat"``
+            (mutual nearest neighbours, fastest) or ``"xfeat-star"`` (semi-dense XFeat* with
+            sub-pixel refinement).
+        max_keypoints: keypoints per image (semi-dense cells for ``"xfeat-star"``).
+        max_matches: keep at most this many matches, the most certain; ``None``: all.
+        max_side: downscale images whose longer side exceeds this (pixels) before matching;
+            ``None``: full resolution. Results are in the original pixels either way.
+        threads: ONNX Runtime and Rust threads; ``None``: every core.
+        shape_model: the shape network (``shape-v1``); ``None``: the bundled one, or
+            ``shape.onnx`` of ``models_dir`` when that has one.
+        models_dir: a directory with ``xfeat_backbone.onnx``, ``xfeat_refine.onnx`` and
+            ``xfeat_lighterglue.onnx`` (the ones the matcher needs); ``None``: the bundled
+            models (``affcorr/models``).
+
+    Every model's ONNX contract is checked on loading.
+
+    >>> import affcorr
+    >>> from affcorr.data import data_dir
+    >>> d = data_dir() / "graffiti"
+    >>> pipe = affcorr.Pipeline("xfeat", max_keypoints=1024, threads=2)
+    >>> res = pipe.match_pair(d / "graf1.png", d / "graf3.png")
+    >>> res.corrs.shape[1], len(res.certainty) == len(res.corrs) > 100
+    (8, True)
+    """
+
+    def __init__(
+        self,
+        matcher: str = "xfeat-lighterglue",
+        *,
+        max_keypoints: int = 4096,
+        max_matches: int | None = None,
+        max_side: int | None = None,
+        threads: int | None = None,
+        shape_model: str | os.PathLike[str] | None = None,
+        models_dir: str | os.PathLike[str] | None = None,
+    ) -> None:
+        if not isinstance(matcher, str) or matcher.lower() not in MATCHERS:
+            raise ValueError(f"matcher must be one of {list(MATCHERS)}, got {matcher!r}")
+        matcher = matcher.lower()
+        max_keypoints = _positive(max_keypoints, "max_keypoints", optional=False)
+        max_matches = _positive(max_matches, "max_matches")
+        max_side = _positive(max_side, "max_side")
+        threads = _positive(threads, "threads")
+        directory = bundled_models_dir() if models_dir is None else Path(os.fspath(models_dir))
+        if models_dir is not None and not directory.is_dir():
+            raise FileNotFoundError(f"models_dir {str(directory)!r} is not a directory")
+        if shape_model is not None:
+            shape = Path(os.fspath(shape_model))
+        elif models_dir is not None and (directory / "shape.onnx").is_file():
+            shape = directory / "shape.onnx"
+        else:
+            shape = bundled_shape_model()
+        paths = {k: directory / f for k, f in _FILES.items()}
+        self._models = {
+            "backbone": paths["backbone"],
+            **({"refine": paths["refine"]} if matcher == "xfeat-star" else {}),
+            **({"lighterglue": paths["lighterglue"]} if matcher == "xfeat-lighterglue" else {}),
+            "shape": shape,
+        }
+        self._runner = _native.PipelineRunner(
+            matcher=matcher,
+            backbone_model=str(paths["backbone"]),
+            shape_model=str(shape),
+            refine_model=str(paths["refine"]) if matcher == "xfeat-star" else None,
+            lighterglue_model=(
+                str(paths["lighterglue"]) if matcher == "xfeat-lighterglue" else None
+            ),
+            ort_library=find_ort_library(),
+            max_keypoints=max_keypoints,
+            max_matches=max_matches,
+            max_side=max_side,
+            threads=threads,
+        )
+
+    # ----------------------------------------------------------------- properties
+
+    @property
+    def matcher(self) -> str:
+        """``"xfeat"``, ``"xfeat-star"`` or ``"xfeat-lighterglue"``."""
+        return self._runner.matcher
+
+    @property
+    def max_keypoints(self) -> int:
+        """Keypoints (or semi-dense cells) per image."""
+        return self._runner.max_keypoints
+
+    @property
+    def max_matches(self) -> int | None:
+        """The cap on matches, or None."""
+        return self._runner.max_matches
+
+    @property
+    def max_side(self) -> int | None:
+        """The working resolution's longer side, or None (full resolution)."""
+        return self._runner.max_side
+
+    @property
+    def threads(self) -> int:
+        """ONNX Runtime intra-op threads and Rust threads."""
+        return self._runner.threads
+
+    @property
+    def models(self) -> dict[str, Path]:
+        """The model files in use (``backbone``, ``refine`` / ``lighterglue``, ``shape``)."""
+        return dict(self._models)
+
+    @property
+    def shape_model(self) -> Path:
+        """The shape network's file."""
+        return self._models["shape"]
+
+    # ----------------------------------------------------------------- matching
+
+    @staticmethod
+    def _image(x: Any) -> Any:
+        return os.fspath(x) if isinstance(x, os.PathLike) else x
+
+    def match_pair(self, image_a: ImageLike, image_b: ImageLike) -> MatchResult:
+        """The ACs of an image pair (paths or arrays)."""
+        return MatchResult(*self._runner.match_pair(self._image(image_a), self._image(image_b)))
+
+    def match_pairs(self, pairs: Iterable[Sequence[ImageLike]]) -> list[MatchResult]:
+        """:meth:`match_pair` over many ``(image_a, image_b)`` pairs, in Rust with the GIL
+        released: the pairs run one after the other, each with every thread (faster than pairs in
+        parallel on few cores; benches/results/pipeline_timing.md). The first failing pair
+        raises, naming its index (``pairs[i]: ...``)."""
+        items = []
+        for i, p in enumerate(pairs):
+            if isinstance(p, (str, bytes, os.PathLike, np.ndarray)) or len(p) != 2:
+                raise ValueError(f"pairs[{i}] must be a pair (image_a, image_b)")
+            items.append((self._image(p[0]), self._image(p[1])))
+        return [MatchResult(*r) for r in self._runner.match_pairs(items)]
+
+    # ----------------------------------------------------------------- estimation
+
+    @staticmethod
+    def _with_quality(res: MatchResult, options: dict[str, Any]) -> dict[str, Any]:
+        # PROSAC orders by quality: default to the matcher's certainty.
+        if str(options.get("sampler", "")).lower() == "prosac" and options.get("quality") is None:
+            options = {**options, "quality": res.certainty}
+        return options
+
+    @staticmethod
+    def _timed(res: MatchResult, seconds: float) -> MatchResult:
+        t = dict(res.timings)
+        t["ransac"] = t.get("ransac", 0.0) + seconds
+        t["total"] = t.get("total", 0.0) + seconds
+        return MatchResult(res.corrs, res.certainty, t, res.num_keypoints)
+
+    def homography(
+        self,
+        image_a: ImageLike,
+        image_b: ImageLike,
+        *,
+        threshold: float = 2.0,
+        seed: int = 0,
+        return_matches: bool = False,
+        **options: Any,
+    ) -> (
+        tuple[NDArray[np.float64], RansacInfo] | tuple[NDArray[np.float64], RansacInfo, MatchResult]
+    ):
+        """The homography ``p2 ~ H p1`` (original pixels) of an image pair.
+
+        :meth:`match_pair`, then :func:`affcorr.estimate_homography` on the ACs (2-AC samples by
+        default) with ``threshold`` (transfer error, pixels; the default 2 px suits XFeat's
+        pixel-grid keypoints, where 1 px loses inliers), ``seed`` and ``**options`` (see
+        :mod:`affcorr.estimation`; with ``sampler="prosac"`` and no ``quality``, the
+        certainties). ``info.inliers`` indexes the ACs of the match result, which
+        ``return_matches=True`` appends (its timings include ``ransac``).
+
+        Returns:
+            ``(H, info)`` as :func:`affcorr.estimate_homography`, or ``(H, info, matches)``.
+        """
+        res = self.match_pair(image_a, image_b)
+        t0 = time.perf_counter()
+        H, info = estimate_homography(
+            res.corrs, threshold=threshold, seed=seed, **self._with_quality(res, options)
+        )
+        res = self._timed(res, time.perf_counter() - t0)
+        return (H, info, res) if return_matches else (H, info)
+
+    def relative_pose(
+        self,
+        image_a: ImageLike,
+        image_b: ImageLike,
+        K1: ArrayLike,  # noqa: N803 (intrinsics are capitals by convention)
+        K2: ArrayLike,  # noqa: N803
+        *,
+        threshold: float = 2.0,
+        seed: int = 0,
+        return_matches: bool = False,
+        **options: Any,
+    ) -> tuple[RelativePose, RansacInfo] | tuple[RelativePose, RansacInfo, MatchResult]:
+        """The relative pose ``X2 = R X1 + t`` of two calibrated images.
+
+        ``K1``, ``K2``: ``(3, 3)`` intrinsics of the original images (checked before matching:
+        upper triangular, positive focal lengths).
+        :meth:`match_pair`, then :func:`affcorr.estimate_relative_pose` with ``threshold``
+        (Sampson distance, pixels), ``seed`` and ``**options``, as :meth:`homography`.
+
+        Returns:
+            ``(pose, info)`` as :func:`affcorr.estimate_relative_pose`, or
+            ``(pose, info, matches)``.
+        """
+        # Invalid intrinsics raise the estimator's ValueError before any matching.
+        _native.normalize_correspondences(np.zeros((0, 8)), K1, K2)
+        res = self.match_pair(image_a, image_b)
+        t0 = time.perf_counter()
+        pose, info = estimate_relative_pose(
+            res.corrs, K1, K2, threshold=threshold, seed=seed, **self._with_quality(res, options)
+        )
+        res = self._timed(res, time.perf_counter() - t0)
+        return (pose, info, res) if return_matches else (pose, info)
+
+    def __repr__(self) -> str:
+        return (
+            f"Pipeline(matcher={self.matcher!r}, max_keypoints={self.max_keypoints}, "
+            f"max_matches={self.max_matches}, max_side={self.max_side}, threads={self.threads})"
+        )
