@@ -86,6 +86,7 @@ def affcorr_methods():
 
     return {
         "affcorr-AC": lambda p: run(p, 8),
+        "affcorr-AC-msac": lambda p: run(p, 8, scoring="msac"),
         "affcorr-AC-magsac": lambda p: run(p, 8, scoring="magsac"),
         "affcorr-points": lambda p: run(p, 4),
     }

@@ -99,8 +99,11 @@ const SAMPLERS: &[(&str, SamplerKind)] = &[
     ("uniform", SamplerKind::Uniform),
     ("prosac", SamplerKind::Prosac),
 ];
-const SCORINGS: &[(&str, ScoringKind)] =
-    &[("msac", ScoringKind::Msac), ("magsac", ScoringKind::Magsac)];
+const SCORINGS: &[(&str, ScoringKind)] = &[
+    ("auto", ScoringKind::Auto),
+    ("msac", ScoringKind::Msac),
+    ("magsac", ScoringKind::Magsac),
+];
 
 fn choice<T: Copy>(v: &Bound<'_, PyAny>, name: &str, choices: &[(&str, T)]) -> PyResult<T> {
     let names: Vec<String> = choices.iter().map(|(n, _)| format!("'{n}'")).collect();

@@ -20,11 +20,14 @@ loop with adaptive termination, local optimisation and a final refinement (DESIG
   ``quality``            ``None``     ``(N,)`` per-correspondence quality for PROSAC, higher is
                                       better (e.g. matcher certainty); in the batch forms a
                                       list with one ``(N_i,)`` array per pair
-  ``scoring``            ``"msac"``   the score of a model: ``"msac"`` (the truncated
-                                      quadratic) or ``"magsac"`` (MAGSAC++: the sigma-consensus++
+  ``scoring``            ``"auto"``   the score of a model: ``"msac"`` (the truncated
+                                      quadratic), ``"magsac"`` (MAGSAC++: the sigma-consensus++
                                       loss marginalised over noise scales up to
                                       ``threshold / 3.64``; also the loss of local optimisation
                                       and of the final refinement; robust to a loose threshold)
+                                      or ``"auto"``: MAGSAC++ for F and the relative pose, MSAC
+                                      for H (the more accurate of the two for each in the peer
+                                      benchmark)
   ``confidence``         ``0.9999``   confidence of the adaptive stopping rule, in (0, 1)
   ``min_iterations``     ``0``        never fewer iterations
   ``max_iterations``     ``10000``    never more iterations
@@ -89,7 +92,8 @@ class RansacInfo:
         num_inliers: their number (0 when no model was found).
         num_iterations: minimal samples drawn.
         score: the model's score (MSAC: the sum over data of ``max(0, 1 - r^2 / threshold^2)``;
-            MAGSAC++: of ``1 - loss(r) / loss(threshold)``; higher is better).
+            MAGSAC++: of ``1 - loss(r) / loss(threshold)``; higher is better). Relative poses
+            count a correspondence whose point triangulates behind a camera as an outlier.
         lo_runs: local optimisations run.
         refinements: 1 if the final refinement improved the model, else 0.
         residual_evaluations: residuals computed to verify and score models (what the SPRT

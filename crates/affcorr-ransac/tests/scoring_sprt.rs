@@ -167,6 +167,7 @@ fn compare_scorings(kind: Kind, scale: f64, min_recall: f64) -> (f64, f64) {
         let s = scene(kind, seed, 800, 0.5);
         let mut o = options(kind, SampleKind::Affine, seed);
         o.ransac.threshold *= scale;
+        o.scoring = ScoringKind::Msac;
         let msac = run(&s, kind, &o);
         o.scoring = ScoringKind::Magsac;
         let magsac = run(&s, kind, &o);
