@@ -155,8 +155,9 @@ impl PipelineRunner {
         match_tuple(py, m, ta + tb)
     }
 
-    /// ACs of many pairs (a sequence of `(image_a, image_b)`), one after the other with every
-    /// thread; the first failing pair raises, naming its index.
+    /// ACs of many pairs (a sequence of `(image_a, image_b)`), in parallel on single-threaded
+    /// copies of the models (`Pipeline::match_pairs`); the first failing pair raises, naming
+    /// its index.
     fn match_pairs<'py>(
         &self,
         py: Python<'py>,

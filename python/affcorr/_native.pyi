@@ -316,7 +316,8 @@ class PipelineRunner:
     ) -> list[
         tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]
     ]:
-        """match_pair over the pairs, one after the other; errors name pairs[i]."""
+        """match_pair over the pairs, in parallel on single-threaded copies of the models when
+        threads > 1; errors name pairs[i]."""
     @property
     def matcher(self) -> str: ...
     @property

@@ -11,7 +11,7 @@ use std::sync::OnceLock;
 
 use affcorr_geom::Mat3;
 use affcorr_ransac::EstimatorOptions;
-use affcorr_runner::{GrayImage, Matcher, Pipeline, RunnerError};
+use affcorr_runner::{GrayImage, ImageSource, Matcher, Pipeline, RunnerError};
 
 fn graffiti() -> &'static (GrayImage, GrayImage, Mat3) {
     static DATA: OnceLock<(GrayImage, GrayImage, Mat3)> = OnceLock::new();
@@ -205,4 +205,40 @@ fn bad_models_and_images_are_named() {
     let tiny = GrayImage::new(20, 20, vec![0.5; 400]).unwrap();
     let e = p.match_pair(&tiny, &tiny).unwrap_err();
     assert!(e.to_string().contains("too small"), "{e}");
+}
+
+#[test]
+fn match_pairs_in_parallel_equal_single_calls() {
+    let (a, b, _) = graffiti();
+    common::init();
+    let p = Pipeline::builder()
+        .matcher(Matcher::XFeatMnn)
+        .models_dir(models())
+        .max_keypoints(1024)
+        .threads(2)
+        .build()
+        .unwrap();
+    let missing = PathBuf::from("/nonexistent/graf.png");
+    let pairs: Vec<(ImageSource<'_>, ImageSource<'_>)> = vec![
+        (a.into(), b.into()),
+        (b.into(), a.into()),
+        (a.into(), (&missing).into()),
+        (a.into(), b.into()),
+    ];
+    let out = p.match_pairs(pairs);
+    assert_eq!(out.len(), 4);
+    let ab = p.match_pair(a, b).unwrap();
+    let ba = p.match_pair(b, a).unwrap();
+    for (got, want) in [(&out[0], &ab), (&out[1], &ba), (&out[3], &ab)] {
+        let got = got.as_ref().unwrap();
+        assert_eq!(got.corrs, want.corrs);
+        assert_eq!(got.certainty, want.certainty);
+    }
+    assert!(
+        matches!(&out[2], Err(RunnerError::ImageOpen { path, .. }) if *path == missing),
+        "{:?}",
+        out[2].as_ref().err()
+    );
+    // One pair, or one thread: no workers needed, same results.
+    assert_eq!(p.match_pairs([(a, b)])[0].as_ref().unwrap().corrs, ab.corrs);
 }
