@@ -95,7 +95,8 @@ class RansacInfo:
             MAGSAC++: of ``1 - loss(r) / loss(threshold)``; higher is better). Relative poses
             count a correspondence whose point triangulates behind a camera as an outlier.
         lo_runs: local optimisations run.
-        refinements: 1 if the final refinement improved the model, else 0.
+        refinements: rounds of the final refinement that improved the model (0 to 4; each
+            round refits on the inliers of the previous one while they change).
         residual_evaluations: residuals computed to verify and score models (what the SPRT
             saves).
         sprt_rejections: hypotheses rejected by the SPRT (0 without it).

@@ -32,7 +32,8 @@ pub struct Estimate<M> {
     pub iterations: usize,
     /// Local optimisations run.
     pub lo_runs: usize,
-    /// Times the final refinement improved the model (0 or 1).
+    /// Rounds of the final refinement that improved the model (0 to 4: each round refits on the
+    /// inliers of the previous one while they change).
     pub refinements: usize,
     /// Squared residuals computed (scoring, local optimisation, refinement excluded): the
     /// verification cost that the SPRT cuts.
@@ -504,40 +505,52 @@ where
     let mut best = best.ok_or(RansacError::NoModel { iterations })?;
     let mut refinements = 0;
     if options.final_refinement {
-        collect_inliers(
-            problem,
-            scoring,
-            &best.model,
-            1.0,
-            &mut scratch,
-            &mut lo_indices,
-            &mut lo_weights,
-        );
-        if lo_indices.len() >= m
-            && let Some(refined) = problem.refine(
+        // Refine on the inliers, then again on the refined model's inliers while that set
+        // changes (at most FINAL_ROUNDS): data that the polished model brings within the
+        // threshold join the fit, as in a refinement over all data with the truncated loss.
+        let mut previous: Vec<usize> = Vec::new();
+        for _ in 0..FINAL_ROUNDS {
+            collect_inliers(
+                problem,
+                scoring,
+                &best.model,
+                1.0,
+                &mut scratch,
+                &mut lo_indices,
+                &mut lo_weights,
+            );
+            if lo_indices.len() < m || lo_indices == previous {
+                break;
+            }
+            let Some(refined) = problem.refine(
                 &best.model,
                 &lo_indices,
                 // The scoring's own cost: the refined model optimises what the score measures.
                 &scoring.refinement_loss(),
                 FINAL_LM_ITERATIONS,
-            )
-            && let Some(e) = score_model(
+            ) else {
+                break;
+            };
+            match score_model(
                 problem,
                 scoring,
                 &refined,
                 best.score,
                 usize::MAX,
                 &mut scratch,
-            )
-            && e.score > best.score
-        {
-            best = Scored {
-                model: refined,
-                score: e.score,
-                inliers: e.inliers,
-                wide_support: e.wide_support,
-            };
-            refinements = 1;
+            ) {
+                Some(e) if e.score > best.score => {
+                    best = Scored {
+                        model: refined,
+                        score: e.score,
+                        inliers: e.inliers,
+                        wide_support: e.wide_support,
+                    };
+                    refinements += 1;
+                }
+                _ => break,
+            }
+            std::mem::swap(&mut previous, &mut lo_indices);
         }
     }
     let inliers = inlier_mask(problem, scoring, &best.model, &mut scratch);
@@ -572,6 +585,8 @@ const LO_MIN_GAIN: f64 = 0.005;
 const LO_LM_ITERATIONS: usize = 5;
 /// Levenberg–Marquardt steps of the final refinement.
 const FINAL_LM_ITERATIONS: usize = 100;
+/// Most refine-and-recollect rounds of the final refinement.
+const FINAL_ROUNDS: usize = 4;
 
 /// Local optimisation fits on at most this many inliers (an even stride through them): enough
 /// to pin a model with ≤ 9 degrees of freedom, and it keeps LO's cost independent of N. The
