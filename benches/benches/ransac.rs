@@ -3,8 +3,8 @@
 
 use affcorr::geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
 use affcorr::ransac::{
-    Correspondences, EstimatorOptions, RansacOptions, SampleKind, estimate_fundamental,
-    estimate_homography, estimate_relative_pose,
+    Correspondences, EstimatorOptions, RansacOptions, SampleKind, ScoringKind,
+    estimate_fundamental, estimate_homography, estimate_relative_pose,
 };
 use criterion::{Criterion, criterion_group, criterion_main};
 use rand::SeedableRng;
@@ -43,19 +43,32 @@ fn bench(c: &mut Criterion) {
     g.sample_size(20);
     let (_, h_data) = data(1, 1);
     let (scene, e_data) = data(8, 2);
-    for (name, kind) in [("ac", SampleKind::Affine), ("points", SampleKind::Points)] {
+    // Default options (MSAC, SPRT on), then MAGSAC++ scoring and SPRT off with AC samples.
+    let variants: [(&str, SampleKind, fn(&mut EstimatorOptions)); 4] = [
+        ("ac", SampleKind::Affine, |_| {}),
+        ("points", SampleKind::Points, |_| {}),
+        ("ac_magsac", SampleKind::Affine, |o| {
+            o.scoring = ScoringKind::Magsac
+        }),
+        ("ac_nosprt", SampleKind::Affine, |o| o.ransac.sprt = false),
+    ];
+    for (name, kind, tweak) in variants {
+        let opts = |threshold| {
+            let mut o = options(threshold, kind);
+            tweak(&mut o);
+            o
+        };
+        let (h_opts, e_opts) = (opts(2.0), opts(1.5));
         g.bench_function(format!("homography_{name}"), |b| {
-            b.iter(|| pool.install(|| estimate_homography(&h_data, &options(2.0, kind))))
+            b.iter(|| pool.install(|| estimate_homography(&h_data, &h_opts)))
         });
         g.bench_function(format!("relative_pose_{name}"), |b| {
             b.iter(|| {
-                pool.install(|| {
-                    estimate_relative_pose(&e_data, &scene.k1, &scene.k2, &options(1.5, kind))
-                })
+                pool.install(|| estimate_relative_pose(&e_data, &scene.k1, &scene.k2, &e_opts))
             })
         });
         g.bench_function(format!("fundamental_{name}"), |b| {
-            b.iter(|| pool.install(|| estimate_fundamental(&e_data, &options(1.5, kind))))
+            b.iter(|| pool.install(|| estimate_fundamental(&e_data, &e_opts)))
         });
     }
     g.finish();
