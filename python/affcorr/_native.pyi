@@ -313,9 +313,7 @@ class PipelineRunner:
         (keypoints in A, keypoints in B)); GIL released."""
     def match_pairs(
         self, pairs: Sequence[tuple[Any, Any]]
-    ) -> list[
-        tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]
-    ]:
+    ) -> list[tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]]:
         """match_pair over the pairs, in parallel on single-threaded copies of the models when
         threads > 1; errors name pairs[i]."""
     @property

@@ -250,6 +250,7 @@ def plane_pairs(
     eye = np.broadcast_to(np.eye(2), (len(x1), 2, 2))
     g1 = _apply(G1i, _grid(x1, eye).reshape(-1, 2)).reshape(-1, PATCH, PATCH, 2)
     g2 = _apply(G2i, _grid(x2c, eye).reshape(-1, 2)).reshape(-1, PATCH, PATCH, 2)
+
     def inside(g):
         return (
             (g[..., 0] >= 0)
