@@ -12,6 +12,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use ort::session::Session;
+use ort::session::builder::SessionBuilder;
 use ort::value::{TensorElementType, ValueType};
 
 use crate::error::{Result, RunnerError};
@@ -273,27 +274,25 @@ pub(crate) fn resolve_threads(threads: Option<usize>) -> Result<usize> {
     }
 }
 
-/// Loads `path` with `threads` intra-op threads and checks it against `spec`.
-pub(crate) fn load(path: &Path, threads: usize, spec: &ContractSpec) -> Result<CheckedModel> {
-    let source = format!("`{}`", path.display());
-    match std::fs::metadata(path) {
-        Ok(m) if m.is_file() => {}
-        Ok(_) => {
-            return Err(RunnerError::ModelOpen {
-                path: path.to_path_buf(),
-                reason: "not a file".to_string(),
-            });
-        }
-        Err(e) => {
-            return Err(RunnerError::ModelOpen {
-                path: path.to_path_buf(),
-                reason: e.to_string(),
-            });
-        }
-    }
+/// Fails with [`RunnerError::ModelOpen`] unless `path` is a readable regular file, so that a
+/// missing model gets a clearer error than ONNX Runtime's.
+pub(crate) fn check_model_file(path: &Path) -> Result<()> {
+    let reason = match std::fs::metadata(path) {
+        Ok(m) if m.is_file() => return Ok(()),
+        Ok(_) => "not a file".to_string(),
+        Err(e) => e.to_string(),
+    };
+    Err(RunnerError::ModelOpen {
+        path: path.to_path_buf(),
+        reason,
+    })
+}
+
+/// A session builder on the process's environment with `threads` intra-op threads.
+pub(crate) fn session_builder(threads: usize) -> Result<SessionBuilder> {
     let env = ort_env::environment()?;
     let context = "configuring the session";
-    let session = Session::builder(env)
+    Session::builder(env)
         .map_err(|e| RunnerError::ort(context, e))?
         .with_intra_threads(threads)
         .map_err(|e| RunnerError::ort(context, e))?
@@ -304,7 +303,14 @@ pub(crate) fn load(path: &Path, threads: usize, spec: &ContractSpec) -> Result<C
         // workers would take the cores from the next one (measured: the second of two
         // spinning backbone sessions ran 1.8× slower; without spinning both run at full speed).
         .with_intra_op_spinning(false)
-        .map_err(|e| RunnerError::ort(context, e))?
+        .map_err(|e| RunnerError::ort(context, e))
+}
+
+/// Loads `path` with `threads` intra-op threads and checks it against `spec`.
+pub(crate) fn load(path: &Path, threads: usize, spec: &ContractSpec) -> Result<CheckedModel> {
+    let source = format!("`{}`", path.display());
+    check_model_file(path)?;
+    let session = session_builder(threads)?
         .commit_from_file(path)
         .map_err(|e| RunnerError::ModelLoad {
             model: source.clone(),
@@ -324,7 +330,7 @@ pub(crate) fn load(path: &Path, threads: usize, spec: &ContractSpec) -> Result<C
     }
 }
 
-fn read_metadata(session: &Session) -> ort::Result<BTreeMap<String, String>> {
+pub(crate) fn read_metadata(session: &Session) -> ort::Result<BTreeMap<String, String>> {
     let meta = session.metadata()?;
     let mut map = BTreeMap::new();
     for key in meta.custom_keys()? {

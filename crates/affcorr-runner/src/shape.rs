@@ -30,11 +30,10 @@ use std::path::Path;
 use std::sync::Mutex;
 
 use ort::session::Session;
-use ort::session::builder::SessionBuilder;
 use ort::value::{TensorElementType, TensorRef, ValueType};
 
+use crate::contract;
 use crate::error::{Result, RunnerError};
-use crate::ort_env;
 use crate::patches::{PATCH_LEN, PATCH_SIZE, Patches};
 
 /// The contract name in the `affcorr.contract` metadata.
@@ -149,7 +148,7 @@ fn softmax_for_each(logits: &[f32], mut f: impl FnMut(usize, f64)) -> Option<()>
 /// Options of [`ShapeModel`].
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ShapeModelOptions {
-    /// ONNX Runtime intra-op threads; `None` uses every core ([`ort_env::default_threads`]).
+    /// ONNX Runtime intra-op threads; `None` uses every core ([`crate::ort_env::default_threads`]).
     pub threads: Option<usize>,
     /// Patch pairs per inference run (≥ 1).
     pub batch_size: usize,
@@ -259,29 +258,14 @@ impl ShapeModel {
     pub fn load_with(path: impl AsRef<Path>, options: &ShapeModelOptions) -> Result<Self> {
         let path = path.as_ref();
         let source = format!("`{}`", path.display());
-        match std::fs::metadata(path) {
-            Ok(m) if m.is_file() => {}
-            Ok(_) => {
-                return Err(RunnerError::ModelOpen {
-                    path: path.to_path_buf(),
-                    reason: "not a file".to_string(),
-                });
-            }
-            Err(e) => {
-                return Err(RunnerError::ModelOpen {
-                    path: path.to_path_buf(),
-                    reason: e.to_string(),
-                });
-            }
-        }
+        contract::check_model_file(path)?;
         let threads = check_options(options)?;
-        let session =
-            builder(threads)?
-                .commit_from_file(path)
-                .map_err(|e| RunnerError::ModelLoad {
-                    model: source.clone(),
-                    reason: e.to_string(),
-                })?;
+        let session = contract::session_builder(threads)?
+            .commit_from_file(path)
+            .map_err(|e| RunnerError::ModelLoad {
+                model: source.clone(),
+                reason: e.to_string(),
+            })?;
         Self::checked(session, source, options.batch_size, threads)
     }
 
@@ -289,13 +273,12 @@ impl ShapeModel {
     pub fn from_bytes(bytes: &[u8], options: &ShapeModelOptions) -> Result<Self> {
         let source = "from memory".to_string();
         let threads = check_options(options)?;
-        let session =
-            builder(threads)?
-                .commit_from_memory(bytes)
-                .map_err(|e| RunnerError::ModelLoad {
-                    model: source.clone(),
-                    reason: e.to_string(),
-                })?;
+        let session = contract::session_builder(threads)?
+            .commit_from_memory(bytes)
+            .map_err(|e| RunnerError::ModelLoad {
+                model: source.clone(),
+                reason: e.to_string(),
+            })?;
         Self::checked(session, source, options.batch_size, threads)
     }
 
@@ -447,29 +430,7 @@ fn check_options(options: &ShapeModelOptions) -> Result<usize> {
     if options.batch_size == 0 {
         return Err(RunnerError::invalid("batch_size", "must be at least 1"));
     }
-    match options.threads {
-        Some(0) => Err(RunnerError::invalid(
-            "threads",
-            "must be at least 1 (or None for every core)",
-        )),
-        Some(t) => Ok(t),
-        None => Ok(ort_env::default_threads()),
-    }
-}
-
-fn builder(threads: usize) -> Result<SessionBuilder> {
-    let env = ort_env::environment()?;
-    let context = "configuring the session";
-    Session::builder(env)
-        .map_err(|e| RunnerError::ort(context, e))?
-        .with_intra_threads(threads)
-        .map_err(|e| RunnerError::ort(context, e))?
-        .with_inter_threads(1)
-        .map_err(|e| RunnerError::ort(context, e))?
-        // Idle workers block instead of spinning, so that they leave the cores to the other
-        // sessions of a pipeline (see crate::contract::load).
-        .with_intra_op_spinning(false)
-        .map_err(|e| RunnerError::ort(context, e))
+    contract::resolve_threads(options.threads)
 }
 
 /// Runs one batch of `n` pairs and appends the outputs to `out`, checking their shapes.
@@ -524,7 +485,8 @@ fn check_contract(
 ) -> Result<(ShapeBins, BTreeMap<String, String>)> {
     let mut problems: Vec<String> = Vec::new();
 
-    let metadata = read_metadata(session).map_err(|e| RunnerError::ort("reading metadata", e))?;
+    let metadata =
+        contract::read_metadata(session).map_err(|e| RunnerError::ort("reading metadata", e))?;
     let key = |k: &str| metadata.get(k).map(String::as_str);
     match key("affcorr.contract") {
         Some(SHAPE_CONTRACT) => {}
@@ -650,17 +612,6 @@ fn bins_hint(output: &str) -> &'static str {
     } else {
         ""
     }
-}
-
-fn read_metadata(session: &Session) -> ort::Result<BTreeMap<String, String>> {
-    let meta = session.metadata()?;
-    let mut map = BTreeMap::new();
-    for key in meta.custom_keys()? {
-        if let Some(value) = meta.custom(&key) {
-            map.insert(key, value);
-        }
-    }
-    Ok(map)
 }
 
 /// Parses and checks a JSON list of bin centres; problems are pushed onto `problems`.
