@@ -35,18 +35,10 @@ sys.path.insert(0, str(ROOT / "python"))
 
 import affcorr  # noqa: E402
 from affcorr.data import graffiti  # noqa: E402
+from affcorr.metrics import affine_errors, correct_mask  # noqa: E402
+from affcorr.train.views import rotation  # noqa: E402
 
 CORRECT_PX = 3.0
-
-
-def _rot(t):
-    c, s = np.cos(t), np.sin(t)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
-
-
-def _apply(H, x):
-    p = x @ H[:2, :2].T + H[:2, 2]
-    return p / (x @ H[2, :2] + H[2, 2])[:, None]
 
 
 def _mnn(d1, d2):
@@ -69,7 +61,7 @@ def _similarity_keypoints(detector, img1, img2):
     # rotated image: angle2 - angle1 = +theta).
     ang = np.radians([k2[b].angle - k1[a].angle for a, b in zip(i, j)])
     s = np.array([k2[b].size / k1[a].size for a, b in zip(i, j)])
-    return x1, x2, s[:, None, None] * _rot(ang)
+    return x1, x2, s[:, None, None] * rotation(ang)
 
 
 def baseline(method: str, img1: np.ndarray, img2: np.ndarray):
@@ -93,15 +85,8 @@ def baseline(method: str, img1: np.ndarray, img2: np.ndarray):
         return v
 
     v1, v2 = shape(k1), shape(k2)
-    a = _rot(-k2[:, 5]) @ v2 @ np.linalg.inv(_rot(-k1[:, 5]) @ v1)
+    a = rotation(-k2[:, 5]) @ v2 @ np.linalg.inv(rotation(-k1[:, 5]) @ v1)
     return k1[:, :2], k2[:, :2], (v1, v2, a)
-
-
-def _errors(A, gt):
-    d = (A - gt).reshape(len(A), 4)
-    a, g = A.reshape(-1, 4), gt.reshape(-1, 4)
-    cos = (a * g).sum(1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(g, axis=1))
-    return np.linalg.norm(d, axis=1), cos
 
 
 def _oracle_rotation(v1, v2, gt):
@@ -120,7 +105,7 @@ def evaluate_pair(name, img1, img2, H, estimator, rows):
     u8 = [np.clip(np.rint(i * 255), 0, 255).astype(np.uint8) for i in (img1, img2)]
     for method in ("SIFT", "ASIFT", "Hessian-Affine"):
         x1, x2, A = baseline(method, *u8)
-        ok = np.linalg.norm(_apply(H, x1) - x2, axis=1) < CORRECT_PX if len(x1) else []
+        ok = correct_mask(np.c_[x1, x2], H, CORRECT_PX)
         if np.sum(ok) == 0:
             continue
         x1, x2 = x1[ok], x2[ok]
@@ -140,9 +125,9 @@ def evaluate_pair(name, img1, img2, H, estimator, rows):
         else:
             variants.append((method, A[ok]))
         for label, a in variants:
-            e_b, c_b = _errors(a, gt)
-            e_os, c_os = _errors(a_os, gt)
-            e_full, c_full = _errors(a_full, gt)
+            e_b, c_b = affine_errors(a, gt)
+            e_os, c_os = affine_errors(a_os, gt)
+            e_full, c_full = affine_errors(a_full, gt)
             rows.append(
                 dict(
                     pair=name,

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from affcorr import cli
 from affcorr.data import data_dir
+from affcorr.metrics import corner_error
 
 
 @pytest.fixture(scope="module")
@@ -28,8 +29,9 @@ def test_read_matrix_forms(tmp_path):
 
 def test_corner_error_is_zero_for_the_same_h():
     H = np.array([[1.1, 0.1, 3], [0.0, 0.9, -2], [1e-4, 0, 1]])
-    assert cli.corner_error(H, H, 640, 480) == 0.0
-    assert cli.corner_error(np.eye(3), H, 640, 480) > 1.0
+    assert corner_error(H, H, 640, 480) == 0.0
+    assert corner_error(np.eye(3), H, 640, 480) > 1.0
+    assert corner_error(np.full((3, 3), np.nan), H, 640, 480) == np.inf
 
 
 def test_match_show_and_homography(graf, tmp_path, capsys):

@@ -32,6 +32,7 @@ import numpy as np
 import pytest
 from affcorr.data import data_dir, graffiti
 from affcorr.export import xfeat_reference as R
+from affcorr.metrics import corner_error
 
 GRAF = data_dir() / "graffiti"
 A_PATH, B_PATH = GRAF / "graf1.png", GRAF / "graf3.png"
@@ -65,16 +66,6 @@ def pipeline(matcher: str) -> affcorr.Pipeline:
     return _PIPELINES[matcher]
 
 
-def corner_error(H: np.ndarray, H_gt: np.ndarray, w: float = 800, h: float = 640) -> float:
-    c = np.array([[0, 0], [w, 0], [w, h], [0, h]], float)
-
-    def apply(M):
-        p = np.c_[c, np.ones(4)] @ M.T
-        return p[:, :2] / p[:, 2:]
-
-    return float(np.linalg.norm(apply(H) - apply(H_gt), axis=1).mean())
-
-
 # --- parity with the numpy reference -------------------------------------------------------------
 
 
@@ -104,7 +95,7 @@ def test_correct_matches_and_homography_on_graffiti(matcher, data):
     H, info, res = pipeline(matcher).homography(A_PATH, B_PATH, threshold=3.0, return_matches=True)
     correct = R.correct_within(res.corrs[:, :2], res.corrs[:, 2:4], H_gt)
     assert correct.sum() >= min_correct, f"{correct.sum()} / {len(res)} correct"
-    err = corner_error(H, H_gt)
+    err = corner_error(H, H_gt, 800, 640)
     assert err < max_err, f"mean corner error {err:.2f} px"
     # info describes the ACs returned; the inliers are mostly correct matches.
     assert isinstance(info, affcorr.RansacInfo) and len(info.inliers) == len(res)

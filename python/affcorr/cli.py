@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .metrics import corner_error
+
 MATCHERS = ["xfeat-lighterglue", "xfeat", "xfeat-star"]
 
 
@@ -53,17 +55,6 @@ def read_matrix(text: str, what: str) -> np.ndarray:
     if m.shape != (3, 3) or not np.all(np.isfinite(m)):
         raise ValueError(f"{what}: expected a finite 3x3 matrix, got shape {m.shape}")
     return m
-
-
-def corner_error(H: np.ndarray, H_gt: np.ndarray, width: int, height: int) -> float:
-    """Mean distance (px) between the image corners mapped by H and by H_gt."""
-    c = np.array([[0, 0], [width - 1, 0], [width - 1, height - 1], [0, height - 1]], float)
-
-    def apply(M):
-        p = c @ M[:2, :2].T + M[:2, 2]
-        return p / (c @ M[2, :2] + M[2, 2])[:, None]
-
-    return float(np.linalg.norm(apply(H) - apply(H_gt), axis=1).mean())
 
 
 def _pipeline(args):

@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 import affcorr
-from affcorr.cli import corner_error
 from affcorr.data import data_dir, graffiti
+from affcorr.metrics import affine_errors, corner_error, correct_mask
 
 
 def run(
@@ -38,14 +38,12 @@ def run(
     H, info = affcorr.estimate_homography(corrs, threshold=3.0)
     t_ransac = time.perf_counter() - t0
 
-    from affcorr.plot import correct_mask
-
     correct = correct_mask(corrs, H_gt, 3.0)
     A = corrs[:, 4:].reshape(-1, 2, 2)
     A_gt = affcorr.affine_from_homography(H_gt, corrs[:, :2])
-    fro = np.linalg.norm((A - A_gt).reshape(-1, 4), axis=1)
+    fro, cos = affine_errors(A, A_gt)
     h, w = img_a.shape
-    err = corner_error(H, H_gt, w, h) if np.all(np.isfinite(H)) else float("inf")
+    err = corner_error(H, H_gt, w, h)
     inliers = info.inliers
 
     print(f"affcorr {affcorr.__version__} — images → ACs → homography on graffiti 1 → 3\n")
@@ -67,7 +65,7 @@ def run(
     print(
         f"affine accuracy on correct matches: median ||A − A_gt||_F = "
         f"{np.median(fro[correct]):.3f}, mean cosine similarity "
-        f"{_cos(A[correct], A_gt[correct]):.3f}"
+        f"{cos[correct].mean():.3f}"
     )
     if out is not None:
         from affcorr.plot import draw_matches
@@ -82,8 +80,3 @@ def run(
         "affine_fro_median": float(np.median(fro[correct])),
         "timings": res.timings,
     }
-
-
-def _cos(A: np.ndarray, B: np.ndarray) -> float:
-    a, b = A.reshape(-1, 4), B.reshape(-1, 4)
-    return float(np.mean((a * b).sum(1) / (np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1))))

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .metrics import correct_mask
+
 
 def _gray(img) -> np.ndarray:
     if isinstance(img, (str, Path)):
@@ -23,14 +25,6 @@ def _gray(img) -> np.ndarray:
         img = img[..., :3].mean(-1)
     img = img.astype(np.float64)
     return img / 255.0 if img.max() > 1.5 else img
-
-
-def correct_mask(corrs: np.ndarray, H: np.ndarray, threshold: float = 3.0) -> np.ndarray:
-    """(N,) bool: the transfer error ||H(x1) - x2|| is below ``threshold`` px."""
-    x1 = corrs[:, :2]
-    p = x1 @ H[:2, :2].T + H[:2, 2]
-    w = x1 @ H[2, :2] + H[2, 2]
-    return np.linalg.norm(p / w[:, None] - corrs[:, 2:4], axis=1) < threshold
 
 
 def draw_matches(
