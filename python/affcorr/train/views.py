@@ -24,6 +24,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F  # noqa: N812
 
+from .._native import correspondences_from_homography
+
 PATCH = 32
 _OFFSETS = np.arange(PATCH, dtype=np.float64) - (PATCH - 1) / 2.0
 # Blur levels of the texture pyramid: the downscale factor m each level is made for.
@@ -265,10 +267,7 @@ def plane_pairs(
     x1, x2, x2c, g1, g2 = x1[keep], x2[keep], x2c[keep], g1[keep], g2[keep]
     pa = texture.sample(g1, _local_shrink(G1i, x1))
     pb = texture.sample(g2, _local_shrink(G2i, x2c))
-    # A = dx2/dx1 of H at x1 (DESIGN.md §2).
-    w = x1 @ H[2, :2] + H[2, 2]
-    A = (H[None, :2, :2] - x2[:, :, None] * H[None, 2:3, :2]) / w[:, None, None]
-    corrs = np.concatenate([x1, x2, A.reshape(-1, 4)], 1)
+    corrs = correspondences_from_homography(H, x1)  # x2 = H(x1), A = dx2/dx1 (DESIGN.md §2)
     return PlanePairs(_photometric(rng, pa, 0.5), _photometric(rng, pb, 1.0), corrs, Fm, H)
 
 
