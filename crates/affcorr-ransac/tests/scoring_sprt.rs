@@ -5,13 +5,16 @@ use affcorr_geom::sampson::sampson_point;
 use affcorr_geom::synthetic::{
     NoiseModel, PlaneScene, noisy_correspondences, random_unit, rotation_about,
 };
-use affcorr_geom::{Mat3, PointCorrespondence, Vec3};
+use affcorr_geom::{PointCorrespondence, Vec3};
 use affcorr_ransac::{
     Correspondences, EstimatorOptions, RansacOptions, SampleKind, ScoringKind,
     estimate_fundamental, estimate_homography, estimate_relative_pose,
 };
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
+
+mod common;
+use common::{angle_deg, transfer_error};
 
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Kind {
@@ -54,27 +57,6 @@ fn scene(kind: Kind, seed: u64, n: usize, outlier_ratio: f64) -> Scene {
     }
 }
 
-fn transfer_error(h: &Mat3, truth: &Mat3) -> f64 {
-    let mut sum = 0.0;
-    let mut n = 0;
-    for x in (0..640).step_by(40) {
-        for y in (0..480).step_by(40) {
-            let p = Vec3::new(x as f64, y as f64, 1.0);
-            let (a, b) = (h * p, truth * p);
-            sum += (a.xy() / a.z - b.xy() / b.z).norm();
-            n += 1;
-        }
-    }
-    sum / n as f64
-}
-
-fn angle_deg(r: &Mat3) -> f64 {
-    ((r.trace() - 1.0) / 2.0)
-        .clamp(-1.0, 1.0)
-        .acos()
-        .to_degrees()
-}
-
 /// One run: (error, recall, precision, iterations, residual evaluations). The error is the
 /// mean transfer error to the true H (px), the mean Sampson distance of exact correspondences
 /// under F (px), or the rotation error (degrees).
@@ -90,7 +72,7 @@ fn run(s: &Scene, kind: Kind, opts: &EstimatorOptions) -> Outcome {
     let (error, inliers, iterations, residuals, model) = match kind {
         Kind::H => {
             let e = estimate_homography(&s.data, opts).unwrap();
-            let err = transfer_error(&e.model, &s.scene.homography());
+            let err = transfer_error(&e.model, &s.scene.homography(), 40);
             (
                 err,
                 e.inliers,
