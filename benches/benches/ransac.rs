@@ -9,6 +9,9 @@ use affcorr::ransac::{
 use criterion::{Criterion, criterion_group, criterion_main};
 use rand::SeedableRng;
 
+/// A bench variant: its name, the sample kind and how it changes the default options.
+type Variant = (&'static str, SampleKind, fn(&mut EstimatorOptions));
+
 fn data(planes: usize, seed: u64) -> (PlaneScene, Correspondences) {
     let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
     let scene = PlaneScene::random(&mut rng);
@@ -44,7 +47,7 @@ fn bench(c: &mut Criterion) {
     let (_, h_data) = data(1, 1);
     let (scene, e_data) = data(8, 2);
     // Default options (MSAC, SPRT on), then MAGSAC++ scoring and SPRT off with AC samples.
-    let variants: [(&str, SampleKind, fn(&mut EstimatorOptions)); 4] = [
+    let variants: [Variant; 4] = [
         ("ac", SampleKind::Affine, |_| {}),
         ("points", SampleKind::Points, |_| {}),
         ("ac_magsac", SampleKind::Affine, |o| {

@@ -34,39 +34,12 @@ fn root() -> PathBuf {
 
 /// `$ORT_DYLIB_PATH`, else `.venv/lib/python3*/site-packages/onnxruntime/capi/libonnxruntime.so*`.
 fn ort_library() -> PathBuf {
-    if let Some(p) = std::env::var_os("ORT_DYLIB_PATH").filter(|p| !p.is_empty()) {
-        // cargo runs tests and benches in the package directory: a relative path given at the
-        // repository root is resolved there.
-        let p = PathBuf::from(p);
-        return if p.is_relative() && !p.exists() {
-            root().join(p)
-        } else {
-            p
-        };
-    }
-    let lib = root().join(".venv/lib");
-    std::fs::read_dir(&lib)
-        .ok()
-        .and_then(|dirs| {
-            dirs.flatten().find_map(|d| {
-                let capi = d.path().join("site-packages/onnxruntime/capi");
-                std::fs::read_dir(capi)
-                    .ok()?
-                    .flatten()
-                    .map(|f| f.path())
-                    .find(|p| {
-                        p.file_name()
-                            .and_then(|n| n.to_str())
-                            .is_some_and(|n| n.starts_with("libonnxruntime.so"))
-                    })
-            })
-        })
-        .unwrap_or_else(|| {
-            panic!(
-                "set ORT_DYLIB_PATH (no onnxruntime wheel under {})",
-                lib.display()
-            )
-        })
+    affcorr::runner::ort_env::locate_library(&root()).unwrap_or_else(|| {
+        panic!(
+            "set ORT_DYLIB_PATH (no onnxruntime wheel under {})",
+            root().join(".venv/lib").display()
+        )
+    })
 }
 
 /// A smooth random image (a sum of a few sinusoids plus noise), `w × h`.
