@@ -179,6 +179,12 @@ pub fn laf_to_affine(laf1: &[[f64; 6]], laf2: &[[f64; 6]], out: &mut [AcRow]) ->
     check_len("out", laf1.len(), out.len())?;
     batch::try_fill(out, |i| {
         let (p, q) = (&laf1[i], &laf2[i]);
+        // The centres too: affine_from_frames only sees the 2×2 parts.
+        for (what, laf) in [("laf1", p), ("laf2", q)] {
+            if laf.iter().any(|v| !v.is_finite()) {
+                return Err(GeomError::NonFinite { what, index: i });
+            }
+        }
         let l1 = Mat2::new(p[0], p[1], p[3], p[4]);
         let l2 = Mat2::new(q[0], q[1], q[3], q[4]);
         let a = affine_from_frames(&l1, &l2, i)?;

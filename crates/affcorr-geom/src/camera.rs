@@ -53,6 +53,10 @@ impl Intrinsics {
             0.0,
             1.0,
         );
+        // Tiny focal lengths (e.g. 1e-200) pass the sign checks but overflow the inverse.
+        if k_inv.iter().any(|v| !v.is_finite()) {
+            return Err(invalid("it is numerically singular (K⁻¹ overflows)"));
+        }
         Ok(Self { k, k_inv })
     }
 

@@ -142,6 +142,15 @@ pub fn pose_from_essential(e: &Mat3, x1: &[Vec2], x2: &[Vec2]) -> Result<(Pose, 
             got: x2.len(),
         });
     }
+    // A NaN point is never "in front", so it would silently lower the counts.
+    for (what, pts) in [("x1", x1), ("x2", x2)] {
+        if let Some(index) = pts
+            .iter()
+            .position(|p| !(p.x.is_finite() && p.y.is_finite()))
+        {
+            return Err(GeomError::NonFinite { what, index });
+        }
+    }
     let candidates = decompose_essential(e)?;
     let mut best = (candidates[0], 0);
     for pose in candidates {

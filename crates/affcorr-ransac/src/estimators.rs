@@ -65,6 +65,7 @@ pub struct EstimatorOptions {
 }
 
 fn sample_kind(data: &Correspondences, opts: &EstimatorOptions) -> Result<SampleKind> {
+    data.validate()?;
     let kind = opts.sample.unwrap_or(if data.has_affine() {
         SampleKind::Affine
     } else {
@@ -111,6 +112,13 @@ fn run_with<P: Problem, S: Scoring>(
                     name: "quality",
                     value: format!("{} values", quality.len()),
                     reason: "needs one value per correspondence",
+                });
+            }
+            if let Some(i) = quality.iter().position(|q| !q.is_finite()) {
+                return Err(RansacError::InvalidOption {
+                    name: "quality",
+                    value: format!("{} at index {i}", quality[i]),
+                    reason: "must be finite",
                 });
             }
             let mut sampler = ProsacSampler::new(quality, problem.sample_size());

@@ -56,6 +56,39 @@ impl Correspondences {
         })
     }
 
+    /// Checks what [`Self::from_ac_rows`] guarantees, for data built from the public fields:
+    /// `x2` (and `a`, unless empty) as long as `x1`, every value finite.
+    pub fn validate(&self) -> Result<()> {
+        let n = self.x1.len();
+        let bad_len = |field: &str, got: usize| RansacError::InvalidOption {
+            name: "corrs",
+            value: format!("x1 has {n} points, {field} has {got}"),
+            reason: "x2 and a (unless empty) need one entry per x1",
+        };
+        if self.x2.len() != n {
+            return Err(bad_len("x2", self.x2.len()));
+        }
+        if !self.a.is_empty() && self.a.len() != n {
+            return Err(bad_len("a", self.a.len()));
+        }
+        let finite = |v: &Vec2| v.x.is_finite() && v.y.is_finite();
+        let bad = (0..n).find(|&i| {
+            !(finite(&self.x1[i])
+                && finite(&self.x2[i])
+                && self
+                    .a
+                    .get(i)
+                    .is_none_or(|a| a.iter().all(|v| v.is_finite())))
+        });
+        match bad {
+            Some(index) => Err(RansacError::NonFinite {
+                what: "corrs",
+                index,
+            }),
+            None => Ok(()),
+        }
+    }
+
     /// Number of correspondences.
     pub fn len(&self) -> usize {
         self.x1.len()
