@@ -278,10 +278,12 @@ def render_plane_views(
     size=(640, 480),
     max_tilt_deg: float = 60.0,
     max_scale_ratio: float = 4.0,
+    tilts_deg: tuple[float, float] | None = None,
 ):
     """Two full views (H, W) float32 of ``image`` on a plane, as :func:`plane_pairs` draws them,
     and the ground-truth homography view 1 -> view 2. Outside the texture is black. For
-    evaluating detectors and matchers on held-out textures."""
+    evaluating detectors and matchers on held-out textures. ``tilts_deg``: the two cameras'
+    tilts from the plane's normal, instead of random ones (0-30 and 0-``max_tilt_deg``)."""
     tex = Texture(image)
     w, h = size
     K1, K2 = _intrinsics(rng), _intrinsics(rng)
@@ -289,8 +291,11 @@ def render_plane_views(
     fit = min(w / tex.w, h / tex.h)  # view 1 sees most of the texture
     s1 = fit * 2.0 ** rng.uniform(0.0, 0.5)
     s2 = s1 * max_scale_ratio ** rng.uniform(-0.5, 0.5)
-    R1, C1 = _look_at(rng, target, math.radians(rng.uniform(0, 30)), K1[1, 1] / s1)
-    R2, C2 = _look_at(rng, target, math.radians(rng.uniform(0, max_tilt_deg)), K2[1, 1] / s2)
+    # Drawn in this order so that seeded calls without tilts_deg give the same views as before.
+    tilt1 = rng.uniform(0, 30) if tilts_deg is None else tilts_deg[0]
+    R1, C1 = _look_at(rng, target, math.radians(tilt1), K1[1, 1] / s1)
+    tilt2 = rng.uniform(0, max_tilt_deg) if tilts_deg is None else tilts_deg[1]
+    R2, C2 = _look_at(rng, target, math.radians(tilt2), K2[1, 1] / s2)
     views = []
     for K, R, C in ((K1, R1, C1), (K2, R2, C2)):
         G = _texture_to_view(K, R, C)
