@@ -13,7 +13,8 @@ shapes on identical points. Metrics: median ||A - A_gt||_F and mean cosine simil
 and vec(A_gt) (paper Table 2), and the same for affcorr with A'' = 0, i.e. (O, S) only
 (Table 4's ablation).
 
-Baselines (DESIGN.md §7): SIFT (similarity from keypoint size and angle), ASIFT
+Baselines (DESIGN.md §7; their code is benches/eval/matchers.py's): SIFT (similarity from
+keypoint size and angle), ASIFT
 (cv2.AffineFeature over SIFT; OpenCV reports its keypoints as similarities), Hessian-Affine
 (pyhesaff, rotation-invariant mode: A = L2 L1^-1 with L = R(-ori) V, the best-agreeing of the
 conventions tried on a known rotation), and Hessian-Affine with an oracle rotation (its affine
@@ -36,57 +37,24 @@ sys.path.insert(0, str(ROOT / "python"))
 import affcorr  # noqa: E402
 from affcorr.data import graffiti  # noqa: E402
 from affcorr.metrics import affine_errors, correct_mask  # noqa: E402
-from affcorr.train.views import rotation  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "benches" / "eval"))
+import matchers  # noqa: E402
 
 CORRECT_PX = 3.0
 
 
-def _mnn(d1, d2):
-    import cv2
-
-    bf = cv2.BFMatcher(cv2.NORM_L2, crossCheck=True)
-    m = bf.match(d1.astype(np.float32), d2.astype(np.float32))
-    return np.array([x.queryIdx for x in m], int), np.array([x.trainIdx for x in m], int)
-
-
-def _similarity_keypoints(detector, img1, img2):
-    k1, d1 = detector.detectAndCompute(img1, None)
-    k2, d2 = detector.detectAndCompute(img2, None)
-    if d1 is None or d2 is None:
-        return np.zeros((0, 2)), np.zeros((0, 2)), np.zeros((0, 2, 2))
-    i, j = _mnn(d1, d2)
-    x1 = np.array([k1[a].pt for a in i]).reshape(-1, 2)
-    x2 = np.array([k2[b].pt for b in j]).reshape(-1, 2)
-    # OpenCV's keypoint angle (degrees) turns the same way as DESIGN.md's R(theta) (checked on a
-    # rotated image: angle2 - angle1 = +theta).
-    ang = np.radians([k2[b].angle - k1[a].angle for a, b in zip(i, j)])
-    s = np.array([k2[b].size / k1[a].size for a, b in zip(i, j)])
-    return x1, x2, s[:, None, None] * rotation(ang)
-
-
 def baseline(method: str, img1: np.ndarray, img2: np.ndarray):
-    """(x1, x2, A) of a baseline's matches on uint8 images."""
-    import cv2
-
+    """(x1, x2, A) of a baseline's matches on uint8 images (benches/eval/matchers.py; for
+    Hessian-Affine, A is (V1, V2, A) with its shapes, for the oracle-rotation row)."""
     if method == "SIFT":
-        return _similarity_keypoints(cv2.SIFT_create(4000), img1, img2)
-    if method == "ASIFT":
-        return _similarity_keypoints(cv2.AffineFeature.create(cv2.SIFT_create(1000)), img1, img2)
-    import pyhesaff
-
-    k1, v1 = pyhesaff.detect_feats_in_image(img1, rotation_invariance=True)
-    k2, v2 = pyhesaff.detect_feats_in_image(img2, rotation_invariance=True)
-    i, j = _mnn(v1, v2)
-    k1, k2 = k1[i], k2[j]
-
-    def shape(k):
-        v = np.zeros((len(k), 2, 2))
-        v[:, 0, 0], v[:, 1, 0], v[:, 1, 1] = k[:, 2], k[:, 3], k[:, 4]
-        return v
-
-    v1, v2 = shape(k1), shape(k2)
-    a = rotation(-k2[:, 5]) @ v2 @ np.linalg.inv(rotation(-k1[:, 5]) @ v1)
-    return k1[:, :2], k2[:, :2], (v1, v2, a)
+        m = matchers.sift(img1, img2, max_keypoints=4000)
+    elif method == "ASIFT":
+        m = matchers.asift(img1, img2, per_view=1000)
+    else:
+        m, v1, v2 = matchers.hesaff_frames(img1, img2)
+        return m.x1, m.x2, (v1, v2, m.A)
+    return m.x1, m.x2, m.A
 
 
 def _oracle_rotation(v1, v2, gt):

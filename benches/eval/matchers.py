@@ -99,10 +99,13 @@ def _matches(x1, x2, A, score, seconds) -> Matches:
     return Matches(x1, x2, A, score, float(seconds))
 
 
-def rotation(theta: np.ndarray) -> np.ndarray:
-    """R(theta) = [[cos, -sin], [sin, cos]] per entry, (N, 2, 2) (DESIGN.md §2)."""
-    c, s = np.cos(theta), np.sin(theta)
-    return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
+def similarity(theta: np.ndarray, scale: np.ndarray | float = 1.0) -> np.ndarray:
+    """``scale R(theta)`` per entry, (N, 2, 2), R = [[cos, -sin], [sin, cos]] (DESIGN.md §2)."""
+    import affcorr
+
+    theta = np.asarray(theta, np.float64).reshape(-1)
+    scale = np.broadcast_to(np.asarray(scale, np.float64), theta.shape)
+    return affcorr.synthesize_affine(theta, scale, np.zeros((len(theta), 3)))
 
 
 def _gray_u8(img: np.ndarray) -> np.ndarray:
@@ -285,7 +288,7 @@ def _similarity_matches(detector, img1, img2) -> Matches:
     # rotated image: angle2 - angle1 = +theta).
     ang = np.radians([k2[b].angle - k1[a].angle for a, b in zip(i, j)])
     s = np.array([k2[b].size / k1[a].size for a, b in zip(i, j)])
-    A = s[:, None, None] * rotation(ang)
+    A = similarity(ang, s)
     return _matches(x1, x2, A, -dist, time.perf_counter() - t0)
 
 
@@ -326,7 +329,7 @@ def hesaff_frames(img1: np.ndarray, img2: np.ndarray) -> tuple[Matches, np.ndarr
         return v
 
     s1, s2 = shape(k1), shape(k2)
-    A = rotation(-k2[:, 5]) @ s2 @ np.linalg.inv(rotation(-k1[:, 5]) @ s1)
+    A = similarity(-k2[:, 5]) @ s2 @ np.linalg.inv(similarity(-k1[:, 5]) @ s1)
     m = _matches(k1[:, :2], k2[:, :2], A, -dist, time.perf_counter() - t0)
     return m, s1, s2
 

@@ -23,6 +23,19 @@ if ! /usr/bin/python3 -c "import torchvision" 2>/dev/null; then
     DEBIAN_FRONTEND=noninteractive apt-get install -y -q --no-install-recommends python3-torchvision \
         >/dev/null || echo "aliked-lightglue: apt-get install python3-torchvision failed" >> "$out"
 fi
+# Debian's torch links the reference libblas (LightGlue ~15x slower than with OpenBLAS). The
+# experiments put Debian's OpenBLAS in front by LD_LIBRARY_PATH (common.use_openblas) from an
+# unpacked copy, leaving the machine's BLAS alternative as it is for everything else.
+blas=benches/eval/.cache/openblas
+if [ ! -d "$blas/usr/lib/x86_64-linux-gnu/openblas-pthread" ]; then
+    tmp=$(mktemp -d)
+    if (cd "$tmp" && apt-get download -q libopenblas0-pthread >/dev/null 2>&1); then
+        mkdir -p "$blas" && dpkg-deb -x "$tmp"/libopenblas0-pthread_*.deb "$blas"
+    else
+        echo "note: libopenblas0-pthread not downloadable; torch peers run on reference BLAS" >&2
+    fi
+    rm -rf "$tmp"
+fi
 pip_install() {
     "$PY" -m pip install -q --disable-pip-version-check -c scripts/constraints.txt "$@"
 }

@@ -1,0 +1,107 @@
+"""Smoke test of the evaluation suite (benches/eval): every experiment's core on one small pair
+with a known homography, for each matcher of the registry that runs here (a peer that is not
+installed, see benches/eval/setup.sh, is skipped with its reason)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+cv2 = pytest.importorskip("cv2", reason="opencv not installed (benches/eval/setup.sh)")
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benches" / "eval"))
+
+import affine  # noqa: E402
+import extreme  # noqa: E402
+import matchers  # noqa: E402
+import matching  # noqa: E402
+
+import data  # noqa: E402
+
+KEYPOINTS = 256
+
+
+@pytest.fixture(scope="module")
+def pair() -> data.Pair:
+    """A 192x256 crop of graffiti 1 and its warp by a strength-1 random homography."""
+    from affcorr.data import graffiti
+
+    g1 = graffiti()[0][200:392, 250:506]
+    ref = np.clip(np.rint(g1 * 255), 0, 255).astype(np.uint8)
+    h, w = ref.shape
+    H = data.random_homography(np.random.default_rng(3), w, h, 1)
+    tgt = cv2.warpPerspective(ref, H, (w, h), flags=cv2.INTER_LINEAR)
+    return data.Pair("smoke", "viewpoint", ref, tgt, H, {"tilt": 0})
+
+
+_RUNS: dict[str, matchers.Matches] = {}
+
+
+def run(name: str, pair: data.Pair) -> matchers.Matches:
+    why = matchers.available()[name]
+    if why:
+        pytest.skip(f"{name} unavailable: {why}")
+    if name not in _RUNS:
+        _RUNS[name] = matchers.run(name, pair.img1, pair.img2, max_keypoints=KEYPOINTS)
+    return _RUNS[name]
+
+
+def test_available_names_every_method():
+    av = matchers.available()
+    assert list(av) == matchers.NAMES
+    assert all(isinstance(v, str) for v in av.values())
+    with pytest.raises(ValueError, match="name"):
+        matchers.run("nope", np.zeros((8, 8), np.uint8), np.zeros((8, 8), np.uint8))
+
+
+def test_mma_score_weights():
+    assert matching.mma_score(np.ones(10)) == pytest.approx(1.0)
+    curve = np.r_[np.zeros(5), np.ones(5)]  # correct only from 6 px on
+    w = 2 - 0.1 * np.arange(1, 11)
+    assert matching.mma_score(curve) == pytest.approx(w[5:].sum() / w.sum())
+
+
+@pytest.mark.parametrize("name", matchers.NAMES)
+def test_matching_core(name, pair):
+    m = run(name, pair)
+    n = len(m)
+    assert m.x1.shape == m.x2.shape == (n, 2) and m.score.shape == (n,)
+    assert (m.A is None) == (name.startswith(("xfeat", "disk", "aliked")))
+    assert m.A is None or m.A.shape == (n, 2, 2)
+    curve = matching.mma_curve(m, pair.H)
+    assert np.all(np.diff(curve) >= 0)
+    # A mild homography of a textured crop: most matches of any working method are right.
+    assert n >= 20 and curve[-1] > 0.5, (n, curve)
+
+
+@pytest.mark.parametrize("name", ["sift", "hesaff", "asift", "affcorr"])
+def test_affine_core(name, pair):
+    m = run(name, pair)
+    r = affine.evaluate_pair(pair, name, m, per_pair=100)
+    assert r is not None and 0 < r["n"] <= 100
+    for key in ("own", "os", "full"):
+        assert np.all(np.isfinite(r[f"fro_{key}"])) and np.all(np.abs(r[f"cos_{key}"]) <= 1 + 1e-9)
+    # SIFT's similarity of a near-similarity warp is close to the truth.
+    if name == "sift":
+        assert np.median(r["fro_own"]) < 0.5
+
+
+def test_with_affcorr_shapes_fills_A(pair):
+    m = run("sift", pair)
+    if matchers.available()["affcorr"]:
+        pytest.skip("affcorr unavailable")
+    s = matchers.with_affcorr_shapes(m.subset(np.arange(min(len(m), 50))), pair.img1, pair.img2)
+    assert s.A.shape == (len(s), 2, 2) and np.all(np.isfinite(s.A))
+    assert np.array_equal(s.x1, m.x1[: len(s)])
+
+
+@pytest.mark.parametrize("name", ["sift", "affcorr"])
+def test_extreme_core(name, pair):
+    m = run(name, pair)
+    r = extreme.score_pair(pair, name, m, extreme.opencv_homography)
+    assert r["matched"] and r["correct_inliers"] > 10, r
+    if name == "affcorr":
+        r = extreme.score_pair(pair, name, m, extreme.affcorr_homography)
+        assert r["matched"], r
