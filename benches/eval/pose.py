@@ -318,19 +318,32 @@ def pairs_for(grid: dict) -> dict[str, list[pose_data.PosePair]]:
 
 
 def schedule(names, data, grid) -> list[tuple[str, pose_data.PosePair]]:
-    """(matcher, pair) in the order the matches are computed: the real pairs first, then the
-    synthetic pairs one by one (every matcher on pair i before pair i + 1), so that a run cut
-    short still has every matcher on the same first pairs. Slow matchers take every
-    ``slow_every``-th pair."""
-    out = []
-    for key in ("motorcycle", "chessboard", "synthetic"):
-        for i, p in enumerate(data[key]):
-            for name in names:
-                every = grid["chess_slow_every" if key == "chessboard" else "slow_every"]
-                if name in SLOW and key != "motorcycle" and i % every:
-                    continue
-                out.append((name, p))
-    return out
+    """(matcher, pair) in the order the matches are computed: the motorcycle and the stereo
+    pairs, then the synthetic pairs one by one (every matcher on pair i before pair i + 1) with
+    a chessboard pair of left views after every CHESS_STRIDE synthetic ones, so that a run cut
+    short still has every matcher on the same first pairs of each dataset. Slow matchers take
+    every ``slow_every``-th synthetic pair and every ``chess_slow_every``-th chessboard pair."""
+
+    def take(name, key, i):
+        every = grid["chess_slow_every" if key.startswith("chessboard") else "slow_every"]
+        return name not in SLOW or key == "motorcycle" or i % every == 0
+
+    chess = [p for p in data["chessboard"] if p.dataset == "chessboard"]
+    stereo = [p for p in data["chessboard"] if p.dataset == "chessboard-stereo"]
+    order = [("motorcycle", i, p) for i, p in enumerate(data["motorcycle"])]
+    order += [("chessboard-stereo", i, p) for i, p in enumerate(stereo)]
+    for i, p in enumerate(data["synthetic"]):
+        order.append(("synthetic", i, p))
+        if i % CHESS_STRIDE == CHESS_STRIDE - 1 and chess:
+            k = i // CHESS_STRIDE
+            if k < len(chess):
+                order.append(("chessboard", k, chess[k]))
+    k0 = len(data["synthetic"]) // CHESS_STRIDE
+    order += [("chessboard", k, p) for k, p in enumerate(chess) if k >= k0]
+    return [(n, p) for key, i, p in order for n in names if take(n, key, i)]
+
+
+CHESS_STRIDE = 5
 
 
 def collect_jobs(names, data, grid, log, cached_only=False) -> list[dict]:

@@ -339,8 +339,9 @@ def _u8(img: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
 
 
-def render_pair(index: int, seed: int = 0) -> dict:
-    """Synthetic pair ``index``: img1, img2 (uint8), K1, K2, R, t (unit), covisible."""
+def render_pair(index: int, seed: int = 0, *, with_depth: bool = False) -> dict:
+    """Synthetic pair ``index``: img1, img2 (uint8), K1, K2, R, t (unit), covisible (and the
+    views' depth maps depth1, depth2 with ``with_depth``: inf where no plane is hit)."""
     for attempt in range(50):
         rng = np.random.default_rng([seed, index, attempt])
         f1 = rng.uniform(420.0, 620.0)
@@ -368,15 +369,12 @@ def render_pair(index: int, seed: int = 0) -> dict:
         img1 = img1 + rng.normal(0, 1.5 / 255, img1.shape)
         img2 = img2 + rng.normal(0, 1.5 / 255, img2.shape)
         t = -R2 @ C2  # X2 = R2 (X1 - C2) with camera 1 = world
-        return dict(
-            img1=_u8(img1),
-            img2=_u8(img2),
-            K1=K1,
-            K2=K2,
-            R=R2,
-            t=_unit(t),
-            covisible=np.float64(cov),
-        )
+        out = dict(img1=_u8(img1), img2=_u8(img2), K1=K1, K2=K2, R=R2, t=_unit(t))
+        out["covisible"] = np.float64(cov)
+        out["baseline"] = np.float64(np.linalg.norm(t))  # scene units
+        if with_depth:
+            out.update(depth1=depth1, depth2=depth2)
+        return out
     raise RuntimeError(f"synthetic pair {index}: no usable draw in 50 attempts")
 
 
