@@ -30,14 +30,17 @@ def read_matrix(text: str, what: str) -> np.ndarray:
     """A 3x3 matrix from "fx,fy,cx,cy", nine comma-separated numbers, or a file."""
     path = Path(text)
     if path.exists():
-        if path.suffix == ".npy":
-            m = np.load(path)
-        elif path.suffix in (".xml", ".yml", ".yaml"):
-            from .data import read_opencv_matrix
+        try:
+            if path.suffix == ".npy":
+                m = np.load(path)
+            elif path.suffix in (".xml", ".yml", ".yaml"):
+                from .data import read_opencv_matrix
 
-            m = read_opencv_matrix(path)
-        else:
-            m = np.loadtxt(path)
+                m = read_opencv_matrix(path)
+            else:
+                m = np.loadtxt(path)
+        except Exception as e:  # any parse failure of a user file is a bad argument
+            raise ValueError(f"{what}: cannot read a 3x3 matrix from {text!r}: {e}") from None
     else:
         try:
             v = [float(x) for x in text.replace(" ", "").split(",") if x]
@@ -52,8 +55,10 @@ def read_matrix(text: str, what: str) -> np.ndarray:
         else:
             raise ValueError(f"{what}: expected 4 (fx,fy,cx,cy) or 9 numbers, got {len(v)}")
     m = np.asarray(m, dtype=np.float64)
-    if m.shape != (3, 3) or not np.all(np.isfinite(m)):
-        raise ValueError(f"{what}: expected a finite 3x3 matrix, got shape {m.shape}")
+    if m.shape != (3, 3):
+        raise ValueError(f"{what}: expected a 3x3 matrix, got shape {m.shape}")
+    if not np.all(np.isfinite(m)):
+        raise ValueError(f"{what}: the matrix contains NaN or infinity")
     return m
 
 
@@ -85,13 +90,21 @@ def _print_timings(timings: dict) -> None:
         print(f"  {k:<12} {1e3 * v:8.1f} ms")
 
 
+def _output_file(path: str | Path, flag: str) -> Path:
+    """Checks that `path` can be written before the work that produces it."""
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise ValueError(f"{flag}: the directory of {str(path)!r} does not exist")
+    return path
+
+
 def cmd_match(args) -> int:
-    pipe = _pipeline(args)
     if args.pairs is not None:
         lines = [ln.split() for ln in Path(args.pairs).read_text().splitlines() if ln.strip()]
         bad = [i + 1 for i, ln in enumerate(lines) if len(ln) != 2]
         if bad:
             raise ValueError(f"--pairs: lines {bad[:5]} do not hold two image paths")
+        pipe = _pipeline(args)
         out = Path(args.output)
         out.mkdir(parents=True, exist_ok=True)
         from ._progress import progress
@@ -108,7 +121,9 @@ def cmd_match(args) -> int:
         print(f"wrote {len(lines)} files to {out}")
         return 0
     if args.image_b is None:
-        raise ValueError("match: give two images, or --pairs FILE")
+        raise ValueError("give two images, or --pairs FILE")
+    _output_file(args.output, "-o")
+    pipe = _pipeline(args)
     res = pipe.match_pair(args.image_a, args.image_b)
     np.savez(
         args.output,
@@ -123,20 +138,19 @@ def cmd_match(args) -> int:
 
 
 def cmd_homography(args) -> int:
+    # A bad --gt fails before the matching, not after it.
+    H_gt = read_matrix(args.gt, "--gt") if args.gt is not None else None
     pipe = _pipeline(args)
     H, info = pipe.homography(args.image_a, args.image_b, threshold=args.threshold)
     n = len(info.inliers)
     print(f"inliers: {int(info.inliers.sum())} / {n}")
     with np.printoptions(precision=6, suppress=True):
         print(f"H =\n{H}")
-    if args.gt is not None:
+    if H_gt is not None:
         from . import read_gray_image
 
         h, w = read_gray_image(args.image_a).shape
-        print(
-            f"mean corner error vs ground truth: "
-            f"{corner_error(H, read_matrix(args.gt, '--gt'), w, h):.2f} px"
-        )
+        print(f"mean corner error vs ground truth: {corner_error(H, H_gt, w, h):.2f} px")
     return 0
 
 
@@ -153,14 +167,21 @@ def cmd_pose(args) -> int:
 def cmd_show(args) -> int:
     from .plot import draw_matches
 
-    data = np.load(args.acs)
+    H = read_matrix(args.gt, "--gt") if args.gt is not None else None
+    _output_file(args.output, "-o")
+    try:
+        data = np.load(args.acs)
+    except (OSError, ValueError, EOFError) as e:
+        # np.load says "pickled data" for any non-.npz bytes; name the file and the fix.
+        raise ValueError(f"{args.acs}: not an .npz file written by `affcorr match` ({e})") from None
+    if not isinstance(data, np.lib.npyio.NpzFile):
+        raise ValueError(f"{args.acs}: a single .npy array, not an .npz of `affcorr match`")
     missing = [k for k in ("corrs", "image_a", "image_b") if k not in data]
     if missing:
         raise ValueError(f"{args.acs}: missing arrays {missing} (write it with `affcorr match`)")
     from . import read_gray_image
 
     a, b = read_gray_image(str(data["image_a"])), read_gray_image(str(data["image_b"]))
-    H = read_matrix(args.gt, "--gt") if args.gt is not None else None
     certainty = data["certainty"] if "certainty" in data else None
     draw_matches(
         a, b, data["corrs"], args.output, H=H, certainty=certainty, threshold=args.threshold
@@ -170,6 +191,7 @@ def cmd_show(args) -> int:
 
 
 def cmd_demo(args) -> int:
+    _output_file(args.out, "-o")
     if args.geometry:
         from affcorr import demo as demo_module
 
@@ -237,9 +259,14 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.run(args)
-    except (ValueError, FileNotFoundError, RuntimeError) as e:
+    except (ValueError, OSError, RuntimeError) as e:
+        # Bad arguments, unreadable or unwritable files, models, ONNX Runtime: one line, no
+        # traceback (OSError covers FileNotFoundError, IsADirectoryError, PermissionError).
         print(f"affcorr {args.command}: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print(f"affcorr {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":
