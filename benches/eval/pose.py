@@ -52,6 +52,7 @@ ROOT = HERE.parents[1]
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT / "benches/peers"))
 
+import common  # noqa: E402  (benches/eval/common.py: OpenBLAS for Debian's torch)
 import matchers  # noqa: E402
 import pose_data  # noqa: E402
 import run as peer_run  # noqa: E402  (benches/peers/run.py: venvs and worker environment)
@@ -391,6 +392,8 @@ def main(argv=None) -> int:
         "--cached", action="store_true", help="estimate on the cached matches only (no matching)"
     )
     args = ap.parse_args(argv)
+    if argv is None:
+        common.use_openblas()  # re-executes this script with OpenBLAS (LightGlue ~15x faster)
     grid = dict(PAIRS["quick" if args.quick else "full"])
     if args.synthetic is not None:
         grid["synthetic"] = args.synthetic
@@ -419,12 +422,12 @@ def main(argv=None) -> int:
     for j in jobs:
         if j["pair"].dataset == "synthetic":
             have[j["matcher"]].add(j["pair"].name)
-    common = set.intersection(*have.values()) if have else set()
+    shared = set.intersection(*have.values()) if have else set()
     counts = {k: len(v) for k, v in have.items()}
     rows += [
         {**r, "dataset": "synthetic-common"}
         for r in rows
-        if r["dataset"] == "synthetic" and r["pair"] in common
+        if r["dataset"] == "synthetic" and r["pair"] in shared
     ]
     meta = dict(
         command="python benches/eval/pose.py "
@@ -437,7 +440,7 @@ def main(argv=None) -> int:
         threshold=THRESHOLD,
         grid=grid,
         synthetic_pairs=counts,
-        common_pairs=len(common),
+        common_pairs=len(shared),
         cached=args.cached,
         unavailable=unavailable,
         notes=notes,
