@@ -9,8 +9,10 @@ with anti-aliasing, exact H.
 
 Protocol (after AffNet / WxBS): every method's matches go through the same robust estimator,
 OpenCV's USAC MAGSAC++ homography at 3 px (10000 iterations, confidence 0.9999); a pair is
-*matched* when the estimated H maps image 1's corners within 10 px of the ground truth (mean
-corner error). Correct inliers: inliers of the estimated H within 3 px of the ground truth.
+*matched* when the estimated H maps the part of image 1 that sees the plane in both views
+within 10 px of the ground truth (mean over a grid of such points; image 1's corners, the
+HPatches measure, can lie near view 2's vanishing line, where even a good H is far off).
+Correct inliers: inliers of the estimated H within 3 px of the ground truth.
 Reported per method: matched pairs N (and per tilt), mean correct inliers per matched pair
 (the paper's "inl."), and mean correct matches per pair before RANSAC. affcorr additionally
 with its own 2-AC homography RANSAC on its ACs (affcorr.estimate_homography, 3 px).
@@ -30,7 +32,7 @@ import common
 import matchers
 import numpy as np
 from affcorr._progress import progress
-from affcorr.metrics import corner_error, correct_mask
+from affcorr.metrics import corner_error, correct_mask, transfer
 
 import data
 
@@ -63,11 +65,38 @@ def affcorr_homography(m: matchers.Matches) -> tuple[np.ndarray, np.ndarray]:
     return H, np.asarray(info.inliers, bool)
 
 
+def overlap_points(pair: data.Pair, n: int = 24) -> np.ndarray:
+    """An n x n grid of image 1's pixels that see the plane in both images (non-black in both,
+    inside image 2 by the ground truth)."""
+    h, w = pair.img1.shape[:2]
+    ys, xs = np.meshgrid(np.linspace(0, h - 1, n), np.linspace(0, w - 1, n), indexing="ij")
+    x = np.c_[xs.ravel(), ys.ravel()]
+    y = transfer(pair.H, x)
+    h2, w2 = pair.img2.shape[:2]
+    keep = np.all(np.isfinite(y), axis=1) & (y[:, 0] >= 0) & (y[:, 1] >= 0)
+    keep &= (y[:, 0] <= w2 - 1) & (y[:, 1] <= h2 - 1)
+    x, y = x[keep], y[keep]
+    r1, r2 = np.rint(x).astype(int), np.rint(y).astype(int)
+    seen = (pair.img1[r1[:, 1], r1[:, 0]] > 0) & (pair.img2[r2[:, 1], r2[:, 0]] > 0)
+    return x[seen]
+
+
+def overlap_error(H: np.ndarray, pair: data.Pair) -> float:
+    """Mean distance (px) between H's and the ground truth's images of the overlap points:
+    image 1's corners (HPatches' corner error) can lie near the vanishing line of a steeply
+    tilted view 2, where a good H is still far off."""
+    x = overlap_points(pair)
+    if not np.all(np.isfinite(H)) or len(x) == 0:
+        return float("inf")
+    d = np.linalg.norm(transfer(H, x) - transfer(pair.H, x), axis=1)
+    return float(np.mean(d)) if np.all(np.isfinite(d)) else float("inf")
+
+
 def score_pair(pair: data.Pair, label: str, m: matchers.Matches, estimator) -> dict:
     H, inl = estimator(m)
     ok = correct_mask(m.corrs, pair.H, THRESHOLD_PX)
     h, w = pair.img1.shape[:2]
-    err = corner_error(H, pair.H, w, h)
+    err = overlap_error(H, pair)
     return dict(
         pair=pair.id,
         tilt=pair.meta["tilt"],
@@ -76,7 +105,8 @@ def score_pair(pair: data.Pair, label: str, m: matchers.Matches, estimator) -> d
         correct=int(ok.sum()),
         inliers=int(inl.sum()),
         correct_inliers=int((inl & ok).sum()),
-        corner_error=err,
+        overlap_error=err,
+        corner_error=corner_error(H, pair.H, w, h),
         matched=bool(err < SUCCESS_PX),
         seconds=m.seconds,
     )
@@ -149,6 +179,7 @@ def main(argv=None) -> None:
                 float(np.mean([r["correct_inliers"] for r in won])) if won else float("nan"),
                 float(np.mean([r["correct"] for r in sel])),
                 float(np.mean([r["matches"] for r in sel])),
+                float(np.median([r["overlap_error"] for r in sel])),
                 float(np.median([r["seconds"] for r in sel])),
             ]
         )
@@ -156,9 +187,11 @@ def main(argv=None) -> None:
         f"Pairs: {len(pairs)} ({len(pairs) // len(tilts)} held-out images x tilts {tilts} deg), "
         f"640x480, at most {args.max_keypoints} keypoints per image, seed {args.seed}. Wall "
         f"time {time.time() - t0:.0f} s (cached matches are reused).",
-        f"N: pairs whose estimated H has a mean corner error < {SUCCESS_PX:.0f} px (per tilt in "
+        f"N: pairs whose estimated H is within {SUCCESS_PX:.0f} px of the ground truth on "
+        "average over the overlap (a grid of image 1's points seen in both views; per tilt in "
         "the next columns). inl.: mean correct inliers (inliers within 3 px of the ground "
-        "truth) per matched pair. correct: mean matches within 3 px per pair, before RANSAC. "
+        "truth) per matched pair. median error: of H over the overlap, all pairs. correct: "
+        "mean matches within 3 px per pair, before RANSAC. "
         "Estimator: OpenCV USAC MAGSAC++ at 3 px for every method; the last row is affcorr's "
         "own AC-based RANSAC on affcorr's ACs.",
         *common.unavailable_note(wanted),
@@ -166,7 +199,8 @@ def main(argv=None) -> None:
     lines = common.header(
         "Experiment 4: extreme viewpoint (paper supplement Table 5)", common.command_line(), notes
     )
-    cols = ["method", "N", *[f"N @{t}°" for t in tilts], "inl.", "correct", "matches", "time (s)"]
+    cols = ["method", "N", *[f"N @{t}°" for t in tilts], "inl.", "correct", "matches"]
+    cols += ["median error (px)", "time (s)"]
     lines += common.md_table(cols, table)
     lines += ["", f"![extreme viewpoint]({out.with_suffix('.png').name})"]
     out.with_suffix(".md").write_text("\n".join(lines) + "\n")
