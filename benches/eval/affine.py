@@ -34,6 +34,8 @@ from affcorr.metrics import affine_errors, correct_mask
 import data
 
 BASELINES = ["hesaff", "asift", "sift", "affcorr"]
+#: Point matchers without shapes: affcorr's shape network at their correct matches.
+POINT_MATCHERS = ["xfeat-lighterglue", "disk-lightglue", "aliked-lightglue"]
 CORRECT_PX = 3.0
 SPLITS = ("overall", "viewpoint", "illumination")
 
@@ -51,7 +53,7 @@ def shapes_at(m: matchers.Matches, img1, img2) -> tuple[np.ndarray, np.ndarray]:
 def evaluate_pair(pair: data.Pair, name: str, m: matchers.Matches, per_pair: int) -> dict | None:
     """Errors of the method's own A and of affcorr's at the method's correct matches."""
     ok = np.nonzero(correct_mask(m.corrs, pair.H, CORRECT_PX))[0]
-    if len(ok) == 0 or m.A is None:
+    if len(ok) == 0:
         return None
     ok = ok[np.argsort(-m.score[ok], kind="stable")[:per_pair]]
     sel = m.subset(ok)
@@ -59,6 +61,8 @@ def evaluate_pair(pair: data.Pair, name: str, m: matchers.Matches, per_pair: int
     full, os_only = shapes_at(sel, pair.img1, pair.img2)
     out = dict(pair=pair.id, kind=pair.kind, method=name, n=len(ok))
     for key, a in (("own", sel.A), ("os", os_only), ("full", full)):
+        if a is None:
+            a = np.full((len(ok), 2, 2), np.nan)
         fro, cos = affine_errors(a, gt)
         out[f"fro_{key}"], out[f"cos_{key}"] = fro, cos
     return out
@@ -67,7 +71,7 @@ def evaluate_pair(pair: data.Pair, name: str, m: matchers.Matches, per_pair: int
 def summarise(rows: list[dict]) -> list[dict]:
     table = []
     for split in SPLITS:
-        for name in BASELINES:
+        for name in BASELINES + POINT_MATCHERS:
             sel = [r for r in rows if r["method"] == name and split in ("overall", r["kind"])]
             if not sel:
                 continue
@@ -122,11 +126,13 @@ def main(argv=None) -> None:
     t0 = time.time()
     av = matchers.available()
     names = [n for n in BASELINES if not av[n]]
+    points = [n for n in POINT_MATCHERS if not av[n]]
     if "affcorr" not in names:
         raise SystemExit(f"affcorr is unavailable: {av['affcorr']}")
     pairs = data.hpatches_pairs(args.max_side, args.seed, args.images)
     rows = []
-    for pair, name in progress([(p, n) for p in pairs for n in names], "affine", "pair x method"):
+    jobs = [(p, n) for p in pairs for n in names + points]
+    for pair, name in progress(jobs, "affine", "pair x method"):
         r = evaluate_pair(pair, name, common.matches(name, pair, args.max_keypoints), args.per_pair)
         if r is not None:
             rows.append(r)
@@ -149,7 +155,7 @@ def main(argv=None) -> None:
         "difference; OpenCV's ASIFT does not expose its simulated tilt); Hessian-Affine gives "
         "A = L2 L1^-1, L = R(-ori) V. Fro = ||A - A_gt||_F, cos = cosine similarity of vec(A) "
         "and vec(A_gt).",
-        *common.unavailable_note(BASELINES),
+        *common.unavailable_note(BASELINES + POINT_MATCHERS),
     ]
     # Table 2: each method's own A at its own correct matches.
     t2 = []
@@ -182,12 +188,13 @@ def main(argv=None) -> None:
         *common.md_table(["split", *[matchers.LABELS[n] for n in names]], t2),
         "",
         "**Same matches** — the baseline's A against affcorr's shape network at the baseline's "
-        "correct matches; (O,S) is Table 4's ablation (A'' = 0).",
+        "correct matches; (O,S) is Table 4's ablation (A'' = 0). The point matchers' rows give "
+        "their matches affcorr's shapes (matchers.with_affcorr_shapes).",
         "",
     ]
     rows_same = []
     for r in table:
-        own = "–" if r["method"] == "affcorr" else None
+        own = "–" if r["method"] in ["affcorr", *POINT_MATCHERS] else None
         rows_same.append(
             [
                 r["split"],
