@@ -80,7 +80,12 @@ ESTIMATORS = [
     ("affcorr", "affcorr-points", False),
     ("gcransac", "gcransac-AC", True),
     ("affcorr", "affcorr-AC", True),
+    ("local", "affcorr-AC-min200", True),
 ]
+#: Variants of affcorr's estimator run in this process (.venv): options beyond the defaults.
+#: At least 200 samples: the adaptive stopping rule alone ends 2-AC RANSAC after ~10-30 samples
+#: when a wrong model has many inliers (seen on multi-plane scenes).
+LOCAL = {"affcorr-AC-min200": dict(min_iterations=200)}
 LABELS = {
     "opencv-USAC_MAGSAC": "OpenCV USAC_MAGSAC (5pt)",
     "poselib": "PoseLib (5pt)",
@@ -88,6 +93,7 @@ LABELS = {
     "affcorr-points": "affcorr (5pt)",
     "gcransac-AC": "GC-RANSAC (2AC)",
     "affcorr-AC": "affcorr (2AC)",
+    "affcorr-AC-min200": "affcorr (2AC, >= 200 samples)",
 }
 DATASETS = ["synthetic", "synthetic-common", "chessboard", "chessboard-stereo", "motorcycle"]
 
@@ -221,18 +227,11 @@ def estimate(jobs: list[dict], tmp: Path, notes: list[str], versions: set) -> li
     for j in jobs:
         for _, method, uses_ac in ESTIMATORS:
             if uses_ac or j["first"]:
-                k = (
-                    j["pair"].dataset,
-                    j["pair"].name,
-                    j["matcher"],
-                    method,
-                    j["A_source"] if uses_ac else "-",
-                )
-                wanted[k] = j
+                wanted[_job_key(j, method, uses_ac)] = j
     todo = {k: j for k, j in wanted.items() if k not in done}
     rows = [done[k] for k in wanted if k in done]
     todo_jobs = list({id(j): j for j in todo.values()}.values())
-    new = _estimate(todo_jobs, tmp, notes, versions)
+    new = _estimate(todo_jobs, tmp, notes, versions, set(todo))
     new = [r for r in new if _key(r) in todo]
     with open(cache, "a") as f:
         for r in new:
@@ -240,17 +239,29 @@ def estimate(jobs: list[dict], tmp: Path, notes: list[str], versions: set) -> li
     return rows + new
 
 
-def _estimate(jobs: list[dict], tmp: Path, notes: list[str], versions: set) -> list[dict]:
-    """One row per job and estimator. A job: matcher, A source, pair, corrs (N, 8)."""
+def _job_key(j: dict, method: str, uses_ac: bool) -> tuple:
+    p = j["pair"]
+    return (p.dataset, p.name, j["matcher"], method, j["A_source"] if uses_ac else "-")
+
+
+def _estimate(
+    jobs: list[dict], tmp: Path, notes: list[str], versions: set, need: set | None = None
+) -> list[dict]:
+    """One row per job and estimator (only the (job, estimator) keys in ``need`` if given).
+    A job: matcher, A source, pair, corrs (N, 8)."""
     rows = []
     ok_jobs = [j for j in jobs if len(j["corrs"]) >= MIN_MATCHES]
+
+    def needed(j, methods, uses_ac):
+        return need is None or any(_job_key(j, m, uses_ac) in need for m in methods)
+
     for group in ("peers", "gcransac", "affcorr"):
         for uses_ac in (False, True):
             methods = [m for g, m, ac in ESTIMATORS if g == group and ac == uses_ac]
             if not methods:
                 continue
             # point methods run once per (matcher, pair): on the first A source's job
-            sel = [j for j in ok_jobs if uses_ac or j["first"]]
+            sel = [j for j in ok_jobs if (uses_ac or j["first"]) and needed(j, methods, uses_ac)]
             if not sel:
                 continue
             scene_list = [dict(corrs=j["corrs"], K1=j["pair"].K1, K2=j["pair"].K2) for j in sel]
@@ -269,6 +280,19 @@ def _estimate(jobs: list[dict], tmp: Path, notes: list[str], versions: set) -> l
                         err = str(raw[key + "error"]).strip().splitlines()[-1][-160:]
                         notes.append(f"{method} on {j['matcher']}/{j['pair'].name}: {err}")
                     rows.append(row(j, method, uses_ac, r, float(raw.get(key + "time", np.nan))))
+    for method, opts in LOCAL.items():
+        import affcorr
+
+        for j in ok_jobs:
+            if not needed(j, [method], True):
+                continue
+            t0 = time.perf_counter()
+            pz, info = affcorr.estimate_relative_pose(
+                j["corrs"], j["pair"].K1, j["pair"].K2, threshold=THRESHOLD, **opts
+            )
+            dt = time.perf_counter() - t0
+            r = (pz.R, pz.t, info.inliers) if info.num_inliers > 0 else None
+            rows.append(row(j, method, True, r, dt))
     # jobs with too few matches: a failure for every estimator
     for j in jobs:
         if len(j["corrs"]) < MIN_MATCHES:
