@@ -47,7 +47,9 @@ pub fn real_roots(c: &[f64], roots: &mut [f64]) -> usize {
             roots[0] = -c[0] / c[1];
             1
         }
-        2 => quadratic(c[2], c[1], c[0], roots),
+        // Scaled to max |c_i| = 1: b² − 4ac of huge (or tiny) coefficients would overflow to
+        // an infinite root (or underflow to a false double root); the roots do not change.
+        2 => quadratic(c[2] / scale, c[1] / scale, c[0] / scale, roots),
         _ => sturm_roots(&c[..=d], roots),
     }
 }
@@ -380,5 +382,26 @@ mod tests {
         // A double root is found once.
         let n = real_roots(&from_roots(&[1.0, 1.0, 3.0]), &mut out);
         assert!(n >= 1 && out[..n].iter().any(|r| (r - 1.0).abs() < 1e-6));
+    }
+
+    #[test]
+    fn quadratics_with_huge_or_tiny_coefficients_keep_finite_roots() {
+        // Found by fuzzing (fuzz/ solvers): b² overflowed, giving the roots [-inf, 0].
+        let mut out = [0.0; MAX_DEGREE];
+        for k in [1e200, 1e-200] {
+            let c = from_roots(&[-3.0, 0.5])
+                .iter()
+                .map(|v| v * k)
+                .collect::<Vec<_>>();
+            assert_eq!(real_roots(&c, &mut out), 2, "scale {k}");
+            assert!(
+                (out[0] + 3.0).abs() < 1e-12 && (out[1] - 0.5).abs() < 1e-12,
+                "{out:?}"
+            );
+        }
+        // 1e150 x² + 1e160 x + 1e150 (b² overflows): roots near -1e10 and -1e-10.
+        assert_eq!(real_roots(&[1e150, 1e160, 1e150], &mut out), 2);
+        assert!((out[0] / -1e10 - 1.0).abs() < 1e-12, "{:?}", &out[..2]);
+        assert!((out[1] / -1e-10 - 1.0).abs() < 1e-12, "{:?}", &out[..2]);
     }
 }
