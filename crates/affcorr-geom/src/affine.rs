@@ -83,6 +83,12 @@ pub fn synthesize(shape: &AffineShape, index: usize) -> Result<Mat2> {
             value: shape.scale,
         });
     }
+    if shape.residual_shape.iter().any(|v| !v.is_finite()) {
+        return Err(GeomError::NonFinite {
+            what: "residual_shape",
+            index,
+        });
+    }
     let a_prime = residual_shape_matrix(&shape.residual_shape).ok_or(GeomError::NotPositive {
         what: "residual_shape (1 + x0 and 1 + x2)",
         index,

@@ -88,6 +88,17 @@ fn geometry_rejects_nan_shapes_and_determinants_by_name() {
         ),
         "{r:?}"
     );
+    let r = synthesize_affine(&[0.0], &[1.0], &[[0.0, 0.0, f64::NAN]], &mut out[..1]);
+    assert!(
+        matches!(
+            r,
+            Err(GeomError::NonFinite {
+                what: "residual_shape",
+                index: 0
+            })
+        ),
+        "{r:?}"
+    );
     let r = synthesize_affine(&[0.0], &[0.0], &[[0.0; 3]], &mut out[..1]);
     assert!(
         matches!(r, Err(GeomError::NotPositive { what: "scale", .. })),
@@ -260,6 +271,19 @@ fn solvers_give_no_model_for_degenerate_or_malformed_samples() {
     assert_eq!(homography_2ac(&reflected[..2], &mut out), 0);
     assert_eq!(fundamental_3ac(&reflected, &mut out), 0);
     assert_eq!(essential_2ac(&reflected[..2], &mut out), 0);
+    // A singular pixel A, normalised (K⁻¹ A K): its det is rounding noise (+7e-16 here), still
+    // no model (the solver used to accept it and return up to 10).
+    let singular: Vec<[f64; 8]> = rows
+        .iter()
+        .map(|r| [r[0], r[1], r[2], r[3], 1.0, 2.0, 2.0, 4.0])
+        .collect();
+    let k2 = Intrinsics::from_focal(610.0, 590.0, 300.0, 250.0).unwrap();
+    let mut normalised = vec![[0.0; 8]; 8];
+    normalize_correspondences(&singular, &k(), &k2, &mut normalised).unwrap();
+    let n = acs(&normalised);
+    for pair in n.windows(2) {
+        assert_eq!(essential_2ac(pair, &mut out), 0);
+    }
 }
 
 /// A caller-owned buffer shorter than `*_MAX_SOLUTIONS` is a programming error (documented in

@@ -61,7 +61,9 @@ pub fn essential_2ac(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize {
     }
     let mut rows = [[0.0; 9]; 6];
     for (i, ac) in acs.iter().enumerate() {
-        if !(ac.a.determinant() > 0.0) {
+        // Relative to ‖A‖²: normalising a singular pixel A (K⁻¹ A K) leaves a det of rounding
+        // size and either sign, which must not pass as a valid AC.
+        if !(ac.a.determinant() > 1e-12 * ac.a.norm_squared()) {
             return 0;
         }
         rows[3 * i] = point_row(&ac.x1, &ac.x2);
