@@ -91,29 +91,43 @@ pub struct PipelineRunner {
 impl PipelineRunner {
     #[new]
     #[pyo3(signature = (
-        *, matcher, backbone_model, shape_model, refine_model = None, lighterglue_model = None,
-        ort_library = None, max_keypoints = None, max_matches = None, max_side = None,
-        threads = None
+        *, matcher, shape_model, backbone_model = None, refine_model = None,
+        lighterglue_model = None, dense_model = None, ort_library = None, max_keypoints = None,
+        max_matches = None, max_side = None, threads = None, seed = 0
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         py: Python<'_>,
         matcher: &str,
-        backbone_model: PathBuf,
         shape_model: PathBuf,
+        backbone_model: Option<PathBuf>,
         refine_model: Option<PathBuf>,
         lighterglue_model: Option<PathBuf>,
+        dense_model: Option<PathBuf>,
         ort_library: Option<PathBuf>,
         max_keypoints: Option<usize>,
         max_matches: Option<usize>,
         max_side: Option<usize>,
         threads: Option<usize>,
+        seed: u64,
     ) -> PyResult<Self> {
         let matcher: Matcher = matcher.parse().map_err(|e| py_error(e, None))?;
         let mut b = Pipeline::builder()
             .matcher(matcher)
-            .backbone_model(backbone_model)
-            .shape_model(shape_model);
+            .shape_model(shape_model)
+            .seed(seed);
+        if let Some(p) = backbone_model {
+            b = b.backbone_model(p);
+        }
+        if let Some(p) = dense_model {
+            if matcher != Matcher::Dense {
+                return Err(PyValueError::new_err(format!(
+                    "dense_model is only used with matcher=\"dense\", not {:?}",
+                    matcher.name()
+                )));
+            }
+            b = b.dense_matcher(p);
+        }
         if let Some(p) = refine_model {
             b = b.refine_model(p);
         }
@@ -200,13 +214,13 @@ impl PipelineRunner {
         PyList::new(py, out)
     }
 
-    /// `"xfeat"`, `"xfeat-star"` or `"xfeat-lighterglue"`.
+    /// `"xfeat"`, `"xfeat-star"`, `"xfeat-lighterglue"` or `"dense"`.
     #[getter]
     fn matcher(&self) -> &'static str {
         self.inner.matcher().name()
     }
 
-    /// Keypoints (or semi-dense cells) per image.
+    /// Keypoints (or semi-dense cells) per image; a dense matcher's matches drawn.
     #[getter]
     fn max_keypoints(&self) -> usize {
         self.inner.max_keypoints()
@@ -230,11 +244,22 @@ impl PipelineRunner {
         self.inner.threads()
     }
 
-    /// The backbone's custom metadata.
+    /// The seed of a dense matcher's balanced sampling.
     #[getter]
-    fn backbone_metadata<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+    fn seed(&self) -> u64 {
+        self.inner.seed()
+    }
+
+    /// The matcher model's custom metadata: the XFeat backbone's, or the dense matcher's.
+    #[getter]
+    fn matcher_metadata<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        for (k, v) in self.inner.backbone().metadata() {
+        let meta = match (self.inner.backbone(), self.inner.dense_matcher()) {
+            (Some(b), _) => b.metadata(),
+            (None, Some(m)) => m.metadata(),
+            (None, None) => return Ok(d),
+        };
+        for (k, v) in meta {
             d.set_item(k, v)?;
         }
         Ok(d)

@@ -287,8 +287,9 @@ def read_gray_image(image: Any) -> NDArray[np.float32]:
 # --- end-to-end pipeline (issue 6; wrapped by affcorr.pipeline) ----------------------------
 
 class PipelineRunner:
-    """Matcher (XFeat backbone + MNN / XFeat* refinement / LighterGlue) and shape network in
-    Rust (use ``affcorr.Pipeline``). Every model's contract is checked on loading.
+    """Matcher (XFeat backbone + MNN / XFeat* refinement / LighterGlue, or a dense-warp-v1
+    model with DKM's balanced sampling) and shape network in Rust (use ``affcorr.Pipeline``).
+    Every model's contract is checked on loading.
     Raises ValueError (unknown matcher, option < 1, descriptor sizes that disagree),
     FileNotFoundError (no such model), RuntimeError (contract violation, ONNX Runtime)."""
 
@@ -296,15 +297,17 @@ class PipelineRunner:
         self,
         *,
         matcher: str,
-        backbone_model: str | os.PathLike[str],
         shape_model: str | os.PathLike[str],
+        backbone_model: str | os.PathLike[str] | None = None,
         refine_model: str | os.PathLike[str] | None = None,
         lighterglue_model: str | os.PathLike[str] | None = None,
+        dense_model: str | os.PathLike[str] | None = None,
         ort_library: str | os.PathLike[str] | None = None,
         max_keypoints: int | None = None,
         max_matches: int | None = None,
         max_side: int | None = None,
         threads: int | None = None,
+        seed: int = 0,
     ) -> None: ...
     def match_pair(
         self, image_a: Any, image_b: Any
@@ -327,4 +330,6 @@ class PipelineRunner:
     @property
     def threads(self) -> int: ...
     @property
-    def backbone_metadata(self) -> dict[str, str]: ...
+    def seed(self) -> int: ...
+    @property
+    def matcher_metadata(self) -> dict[str, str]: ...

@@ -5,12 +5,15 @@
 1. **decode**: files are decoded (PNG, JPEG) to gray; arrays are taken as
    :func:`affcorr.read_gray_image` takes them. With ``max_side``, an image whose longer side
    exceeds it is downscaled (antialiased) to that working resolution.
-2. **matcher**: the XFeat backbone (``models/xfeat_backbone.onnx``; twice per image for XFeat*).
+2. **matcher**: the XFeat backbone (``models/xfeat_backbone.onnx``; twice per image for XFeat*),
+   or a dense matcher (``"dense"``: a ``dense-warp-v1`` model such as a DKM or RoMa export,
+   given as ``dense_model``; it sees the images in colour).
 3. **detection** and **matching**: sparse keypoints + mutual nearest neighbours (``"xfeat"``),
    semi-dense cells + mutual nearest neighbours + sub-pixel refinement (``"xfeat-star"``,
    ``models/xfeat_refine.onnx``), or sparse keypoints + LighterGlue (``"xfeat-lighterglue"``,
    ``models/xfeat_lighterglue.onnx``). The post-processing follows
-   ``affcorr.export.xfeat_reference`` (docs/matchers.md).
+   ``affcorr.export.xfeat_reference`` (docs/matchers.md). A dense matcher's matches are drawn
+   by DKM's balanced sampling from its certainty map (seeded: ``seed``).
 4. **patches** and **shape_net**: 32x32 patches around the matched points and the shape network's
    affine map ``A = dx2/dx1`` at each (``models/shape.onnx``, see :class:`affcorr.ShapeEstimator`).
 
@@ -41,10 +44,13 @@ from . import _native
 from .estimation import RansacInfo, RelativePose, estimate_homography, estimate_relative_pose
 from .shape import bundled_shape_model, find_ort_library
 
-__all__ = ["MATCHERS", "MatchResult", "Pipeline", "bundled_models_dir"]
+__all__ = ["DEFAULT_DENSE_MATCHES", "MATCHERS", "MatchResult", "Pipeline", "bundled_models_dir"]
 
 #: The matcher names :class:`Pipeline` takes.
-MATCHERS: tuple[str, ...] = ("xfeat-lighterglue", "xfeat", "xfeat-star")
+MATCHERS: tuple[str, ...] = ("xfeat-lighterglue", "xfeat", "xfeat-star", "dense")
+
+#: Matches a dense matcher draws by default (``max_matches=None``).
+DEFAULT_DENSE_MATCHES = 2000
 
 #: An image: a PNG/JPEG file path, or an array (H, W) / (H, W, C), C in 1..4, of dtype uint8
 #: (divided by 255), uint16 (divided by 65535) or float (values in [0, 1]).
@@ -54,6 +60,7 @@ _FILES = {
     "backbone": "xfeat_backbone.onnx",
     "refine": "xfeat_refine.onnx",
     "lighterglue": "xfeat_lighterglue.onnx",
+    "dense": "dense.onnx",
 }
 
 
@@ -105,18 +112,26 @@ class Pipeline:
     Args:
         matcher: ``"xfeat-lighterglue"`` (XFeat keypoints matched by LighterGlue: the most
             correct matches, but its cost grows with ``max_keypoints`` squared), ``"xfeat"``
-            (mutual nearest neighbours, fastest) or ``"xfeat-star"`` (semi-dense XFeat* with
-            sub-pixel refinement).
-        max_keypoints: keypoints per image (semi-dense cells for ``"xfeat-star"``).
-        max_matches: keep at most this many matches, the most certain; ``None``: all.
+            (mutual nearest neighbours, fastest), ``"xfeat-star"`` (semi-dense XFeat* with
+            sub-pixel refinement) or ``"dense"`` (a ``dense-warp-v1`` model, ``dense_model``).
+            ``None``: ``"dense"`` when ``dense_model`` is given, else ``"xfeat-lighterglue"``.
+        max_keypoints: keypoints per image (semi-dense cells for ``"xfeat-star"``; unused by
+            ``"dense"``).
+        max_matches: keep at most this many matches, the most certain; ``None``: all. A dense
+            matcher draws this many (``None``: ``DEFAULT_DENSE_MATCHES``, 2000).
         max_side: downscale images whose longer side exceeds this (pixels) before matching;
             ``None``: full resolution. Results are in the original pixels either way.
         threads: ONNX Runtime and Rust threads; ``None``: every core.
         shape_model: the shape network (``shape-v1``); ``None``: the bundled one, or
             ``shape.onnx`` of ``models_dir`` when that has one.
         models_dir: a directory with ``xfeat_backbone.onnx``, ``xfeat_refine.onnx`` and
-            ``xfeat_lighterglue.onnx`` (the ones the matcher needs); ``None``: the bundled
-            models (``affcorr/models``).
+            ``xfeat_lighterglue.onnx`` (the ones the matcher needs; ``dense.onnx`` for
+            ``"dense"`` without ``dense_model``); ``None``: the bundled models
+            (``affcorr/models``).
+        dense_model: a ``dense-warp-v1`` ONNX file (docs/matchers.md says how to export DKM or
+            RoMa to it; none is shipped).
+        seed: seed of the dense matcher's balanced sampling (the same seed gives the same
+            matches).
 
     Every model's ONNX contract is checked on loading.
 
@@ -131,7 +146,7 @@ class Pipeline:
 
     def __init__(
         self,
-        matcher: str = "xfeat-lighterglue",
+        matcher: str | None = None,
         *,
         max_keypoints: int = 4096,
         max_matches: int | None = None,
@@ -139,14 +154,22 @@ class Pipeline:
         threads: int | None = None,
         shape_model: str | os.PathLike[str] | None = None,
         models_dir: str | os.PathLike[str] | None = None,
+        dense_model: str | os.PathLike[str] | None = None,
+        seed: int = 0,
     ) -> None:
+        if matcher is None:
+            matcher = "dense" if dense_model is not None else "xfeat-lighterglue"
         if not isinstance(matcher, str) or matcher.lower() not in MATCHERS:
             raise ValueError(f"matcher must be one of {list(MATCHERS)}, got {matcher!r}")
         matcher = matcher.lower()
+        if dense_model is not None and matcher != "dense":
+            raise ValueError(f'dense_model is only used with matcher="dense", not {matcher!r}')
         max_keypoints = _positive(max_keypoints, "max_keypoints", optional=False)
         max_matches = _positive(max_matches, "max_matches")
         max_side = _positive(max_side, "max_side")
         threads = _positive(threads, "threads")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative int, got {seed!r}")
         directory = bundled_models_dir() if models_dir is None else Path(os.fspath(models_dir))
         if models_dir is not None and not directory.is_dir():
             raise FileNotFoundError(f"models_dir {str(directory)!r} is not a directory")
@@ -157,38 +180,56 @@ class Pipeline:
         else:
             shape = bundled_shape_model()
         paths = {k: directory / f for k, f in _FILES.items()}
-        self._models = {
-            "backbone": paths["backbone"],
-            **({"refine": paths["refine"]} if matcher == "xfeat-star" else {}),
-            **({"lighterglue": paths["lighterglue"]} if matcher == "xfeat-lighterglue" else {}),
-            "shape": shape,
-        }
+        if dense_model is not None:
+            paths["dense"] = Path(os.fspath(dense_model))
+        elif matcher == "dense" and not paths["dense"].is_file():
+            raise ValueError(
+                'matcher="dense" needs dense_model= (a dense-warp-v1 ONNX file; none is shipped, '
+                f"docs/matchers.md says how to export DKM or RoMa) or {_FILES['dense']} in "
+                "models_dir"
+            )
+        needs = {
+            "xfeat": ["backbone"],
+            "xfeat-star": ["backbone", "refine"],
+            "xfeat-lighterglue": ["backbone", "lighterglue"],
+            "dense": ["dense"],
+        }[matcher]
+        self._models = {**{k: paths[k] for k in needs}, "shape": shape}
+        model_args = {f"{k}_model": str(paths[k]) for k in needs}
         self._runner = _native.PipelineRunner(
             matcher=matcher,
-            backbone_model=str(paths["backbone"]),
             shape_model=str(shape),
-            refine_model=str(paths["refine"]) if matcher == "xfeat-star" else None,
-            lighterglue_model=(
-                str(paths["lighterglue"]) if matcher == "xfeat-lighterglue" else None
-            ),
+            **model_args,
             ort_library=find_ort_library(),
             max_keypoints=max_keypoints,
             max_matches=max_matches,
             max_side=max_side,
             threads=threads,
+            seed=int(seed),
         )
 
     # ----------------------------------------------------------------- properties
 
     @property
     def matcher(self) -> str:
-        """``"xfeat"``, ``"xfeat-star"`` or ``"xfeat-lighterglue"``."""
+        """``"xfeat"``, ``"xfeat-star"``, ``"xfeat-lighterglue"`` or ``"dense"``."""
         return self._runner.matcher
 
     @property
     def max_keypoints(self) -> int:
-        """Keypoints (or semi-dense cells) per image."""
+        """Keypoints (or semi-dense cells) per image; for ``"dense"`` the matches drawn."""
         return self._runner.max_keypoints
+
+    @property
+    def seed(self) -> int:
+        """The seed of a dense matcher's balanced sampling."""
+        return self._runner.seed
+
+    @property
+    def matcher_metadata(self) -> dict[str, str]:
+        """The matcher model's custom ONNX metadata (the XFeat backbone's or the dense
+        matcher's), e.g. ``affcorr.contract``."""
+        return dict(self._runner.matcher_metadata)
 
     @property
     def max_matches(self) -> int | None:
@@ -207,7 +248,8 @@ class Pipeline:
 
     @property
     def models(self) -> dict[str, Path]:
-        """The model files in use (``backbone``, ``refine`` / ``lighterglue``, ``shape``)."""
+        """The model files in use (``backbone``, ``refine`` / ``lighterglue``, or ``dense``;
+        ``shape``)."""
         return dict(self._models)
 
     @property

@@ -26,7 +26,7 @@ pub const BACKBONE_CONTRACT: &str = "features-backbone-v1";
 pub const REFINE_CONTRACT: &str = "features-refine-v1";
 /// LighterGlue: keypoints and descriptors of two images → matches.
 pub const LIGHTERGLUE_CONTRACT: &str = "matcher-lighterglue-v1";
-/// A dense matcher (DKM, RoMa): two images → warp and certainty (not run by this runner yet).
+/// A dense matcher (DKM, RoMa): two images → warp and certainty ([`crate::dense`]).
 pub const DENSE_WARP_CONTRACT: &str = "dense-warp-v1";
 
 /// One input or output of a contract.
@@ -180,6 +180,39 @@ pub(crate) const LIGHTERGLUE_SPEC: ContractSpec = ContractSpec {
         "affcorr.keypoint_normalisation",
         "affcorr.min_conf",
     ],
+};
+
+pub(crate) const DENSE_WARP_SPEC: ContractSpec = ContractSpec {
+    name: DENSE_WARP_CONTRACT,
+    inputs: &[
+        TensorSpec {
+            name: "image_a",
+            ty: F32,
+            rank: 4,
+            fixed: &[(0, 1), (1, 3)],
+        },
+        TensorSpec {
+            name: "image_b",
+            ty: F32,
+            rank: 4,
+            fixed: &[(0, 1), (1, 3)],
+        },
+    ],
+    outputs: &[
+        TensorSpec {
+            name: "warp",
+            ty: F32,
+            rank: 4,
+            fixed: &[(0, 1), (3, 2)],
+        },
+        TensorSpec {
+            name: "certainty",
+            ty: F32,
+            rank: 3,
+            fixed: &[(0, 1)],
+        },
+    ],
+    metadata: &[],
 };
 
 /// A session whose contract has been checked, with the model's custom metadata.

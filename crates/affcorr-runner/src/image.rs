@@ -105,12 +105,8 @@ impl GrayImage {
 
     /// Reads and decodes an image file (PNG or JPEG, recognised by content).
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|e| RunnerError::ImageOpen {
-            path: path.to_path_buf(),
-            reason: e.to_string(),
-        })?;
-        decode(&bytes, &format!("`{}`", path.display()))
+        let (img, name) = open_dynamic(path.as_ref())?;
+        gray_from_dynamic(&img, &name)
     }
 
     /// Decodes an encoded image (PNG or JPEG) held in memory.
@@ -202,10 +198,30 @@ fn jpeg_complete(bytes: &[u8]) -> bool {
 }
 
 fn decode(bytes: &[u8], source_name: &str) -> Result<GrayImage> {
-    let decode_error = |reason: String| RunnerError::ImageDecode {
+    gray_from_dynamic(&decode_dynamic(bytes, source_name)?, source_name)
+}
+
+/// Reads and decodes an image file in the decoder's pixel type, with the checks of
+/// [`GrayImage::open`] (for the dense matcher, which wants the colour too); also returns the
+/// name errors use for it.
+pub(crate) fn open_dynamic(path: &Path) -> Result<(DynamicImage, String)> {
+    let bytes = std::fs::read(path).map_err(|e| RunnerError::ImageOpen {
+        path: path.to_path_buf(),
+        reason: e.to_string(),
+    })?;
+    let name = format!("`{}`", path.display());
+    Ok((decode_dynamic(&bytes, &name)?, name))
+}
+
+fn decode_error(source_name: &str, reason: String) -> RunnerError {
+    RunnerError::ImageDecode {
         source_name: source_name.to_string(),
         reason,
-    };
+    }
+}
+
+fn decode_dynamic(bytes: &[u8], source_name: &str) -> Result<DynamicImage> {
+    let decode_error = |reason: String| decode_error(source_name, reason);
     let reader = ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| decode_error(e.to_string()))?;
@@ -221,9 +237,14 @@ fn decode(bytes: &[u8], source_name: &str) -> Result<GrayImage> {
             "truncated JPEG (no end-of-image marker after the last scan)".to_string(),
         ));
     }
-    let img = reader.decode().map_err(|e| decode_error(e.to_string()))?;
+    reader.decode().map_err(|e| decode_error(e.to_string()))
+}
+
+/// A decoded image to gray (BT.601 luma for colour).
+pub(crate) fn gray_from_dynamic(img: &DynamicImage, source_name: &str) -> Result<GrayImage> {
+    let decode_error = |reason: String| decode_error(source_name, reason);
     let (w, h) = (img.width() as usize, img.height() as usize);
-    let (channels, pixels) = match &img {
+    let (channels, pixels) = match img {
         DynamicImage::ImageLuma8(b) => (1, PixelData::U8(b.as_raw())),
         DynamicImage::ImageLumaA8(b) => (2, PixelData::U8(b.as_raw())),
         DynamicImage::ImageRgb8(b) => (3, PixelData::U8(b.as_raw())),

@@ -11,6 +11,8 @@
 //! - [`features`]: the XFeat backbone (`features-backbone-v1`) and sparse / semi-dense feature
 //!   extraction from its maps (the specification is `python/affcorr/export/xfeat_reference.py`).
 //! - [`matching`]: mutual nearest neighbours, the XFeat* refinement model and LighterGlue.
+//! - [`dense`]: dense matchers (DKM, RoMa) under `dense-warp-v1` and DKM's balanced sampling
+//!   of matches from their certainty map.
 //! - [`contract`]: the matcher models' ONNX contracts (docs/matchers.md), checked on loading.
 //! - [`pipeline`]: [`Pipeline`]: images → matches → ACs → homography / relative pose, timed per
 //!   stage.
@@ -36,6 +38,7 @@
 //! ```
 
 pub mod contract;
+pub mod dense;
 pub mod error;
 pub mod estimator;
 pub mod features;
@@ -53,6 +56,7 @@ pub use ort_env::{init_ort, ort_library};
 pub use patches::{PATCH_SIZE, Patches, extract_patches};
 pub use shape::{ShapeBins, ShapeModel, ShapeModelOptions, ShapeOutputs, ShapePrediction};
 
+pub use dense::{DenseMatcher, DenseSample, DenseWarp, RgbImage, SamplingOptions, balanced_sample};
 pub use features::{Backbone, BackboneConfig, BackboneMaps, DenseFeatures, SparseFeatures};
 pub use matching::{GlueMatches, LighterGlue, MnnMatches, RefineModel, mutual_nearest_neighbours};
 pub use pipeline::{

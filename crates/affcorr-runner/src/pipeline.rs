@@ -1,6 +1,7 @@
-//! Images in, affine correspondences and geometry out: the matcher (XFeat, XFeat* or
-//! XFeat + LighterGlue) gives the points, the shape network the affine maps at them, and
-//! affcorr-ransac the homography or relative pose (issue 6).
+//! Images in, affine correspondences and geometry out: the matcher (XFeat, XFeat*,
+//! XFeat + LighterGlue, or a dense `dense-warp-v1` model such as DKM or RoMa) gives the points,
+//! the shape network the affine maps at them, and affcorr-ransac the homography or relative
+//! pose (issue 6).
 //!
 //! ```no_run
 //! use affcorr_runner::{init_ort, Matcher, Pipeline};
@@ -29,12 +30,17 @@
 //!    s = max_side / max(W, H) to its *working resolution*; the matcher's inputs are resized to
 //!    multiples of 32 ([`crate::features::preprocess`]).
 //! 2. **matcher**: the backbone network (once per image; twice for XFeat*, at scales 0.6 and
-//!    1.3).
-//! 3. **detection**: sparse keypoints and descriptors, or the semi-dense cells of XFeat*.
+//!    1.3), or the dense matcher on the pair (colour images resized to its input size,
+//!    [`crate::dense`]).
+//! 3. **detection**: sparse keypoints and descriptors, or the semi-dense cells of XFeat* (none
+//!    for a dense matcher).
 //! 4. **matching**: mutual nearest neighbours (certainty = cosine similarity), then the XFeat*
 //!    refinement model (certainty = its confidence), or LighterGlue (certainty = its match
-//!    score). Matches are sorted by decreasing certainty (stable) and cut to
-//!    [`PipelineBuilder::max_matches`].
+//!    score); for a dense matcher DKM's balanced sampling of
+//!    [`PipelineBuilder::max_matches`] (default [`DEFAULT_DENSE_MATCHES`]) cells from its
+//!    certainty map, seeded by [`PipelineBuilder::seed`] (certainty = the model's), mapped to
+//!    pixels of the working images by x = W/2 · (u + 1) − 0.5. Matches are sorted by decreasing
+//!    certainty (stable) and cut to [`PipelineBuilder::max_matches`].
 //! 5. **patches** and **shape net**: 32×32 patches around the matched points in the working
 //!    images, the shape network's A at them ([`crate::estimator`]).
 //! 6. The ACs are mapped back to the original pixels (pixel centres at integers, image edges
@@ -63,13 +69,14 @@ use affcorr_ransac::{
     estimate_relative_pose,
 };
 
+use crate::dense::{DenseMatcher, RgbImage, SamplingOptions, balanced_sample};
 use crate::error::{Result, RunnerError};
 use crate::estimator::ShapeEstimator;
 use crate::features::{
     Backbone, DenseFeatures, SparseFeatures, dense_split, detect_and_compute, plane, preprocess,
     star_scale_inputs,
 };
-use crate::image::GrayImage;
+use crate::image::{GrayImage, gray_from_dynamic, open_dynamic};
 use crate::matching::{
     LighterGlue, RefineModel, mutual_nearest_neighbours, normalize_keypoints_lighterglue,
     refine_matches,
@@ -85,6 +92,12 @@ pub const REFINE_FILE: &str = "xfeat_refine.onnx";
 pub const LIGHTERGLUE_FILE: &str = "xfeat_lighterglue.onnx";
 /// The shape network's file name.
 pub const SHAPE_FILE: &str = "shape.onnx";
+/// A dense matcher's file name in a models directory (none is shipped: DKM/RoMa exports are
+/// the user's, docs/matchers.md).
+pub const DENSE_FILE: &str = "dense.onnx";
+/// Matches a dense matcher draws when [`PipelineBuilder::max_matches`] is not set. DKM draws
+/// 10 000; each costs a shape-network evaluation (~0.6 ms on 2 cores), so fewer by default.
+pub const DEFAULT_DENSE_MATCHES: usize = 2000;
 
 /// Which matcher gives the points.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -97,11 +110,19 @@ pub enum Matcher {
     XFeatStar,
     /// Sparse XFeat keypoints matched by LighterGlue (`"xfeat-lighterglue"`).
     XFeatLighterGlue,
+    /// A dense matcher (`dense-warp-v1`: DKM, RoMa) with DKM's balanced sampling (`"dense"`);
+    /// see [`PipelineBuilder::dense_matcher`].
+    Dense,
 }
 
 impl Matcher {
     /// Every matcher.
-    pub const ALL: [Matcher; 3] = [Self::XFeatMnn, Self::XFeatStar, Self::XFeatLighterGlue];
+    pub const ALL: [Matcher; 4] = [
+        Self::XFeatMnn,
+        Self::XFeatStar,
+        Self::XFeatLighterGlue,
+        Self::Dense,
+    ];
 
     /// The name used by the Python API and the CLI.
     pub fn name(self) -> &'static str {
@@ -109,6 +130,7 @@ impl Matcher {
             Self::XFeatMnn => "xfeat",
             Self::XFeatStar => "xfeat-star",
             Self::XFeatLighterGlue => "xfeat-lighterglue",
+            Self::Dense => "dense",
         }
     }
 }
@@ -123,16 +145,17 @@ impl FromStr for Matcher {
     type Err = RunnerError;
 
     /// `"xfeat"` (also `"xfeat-mnn"`), `"xfeat-star"` (`"xfeat*"`), `"xfeat-lighterglue"`
-    /// (`"lighterglue"`), case-insensitive.
+    /// (`"lighterglue"`), `"dense"` (`"dense-warp"`), case-insensitive.
     fn from_str(s: &str) -> Result<Self> {
         match s.to_ascii_lowercase().replace('_', "-").as_str() {
             "xfeat" | "xfeat-mnn" => Ok(Self::XFeatMnn),
             "xfeat-star" | "xfeat*" => Ok(Self::XFeatStar),
             "xfeat-lighterglue" | "lighterglue" => Ok(Self::XFeatLighterGlue),
+            "dense" | "dense-warp" => Ok(Self::Dense),
             _ => Err(RunnerError::invalid(
                 "matcher",
                 format!(
-                    "unknown matcher {s:?}; expected \"xfeat\", \"xfeat-star\" or \"xfeat-lighterglue\""
+                    "unknown matcher {s:?}; expected \"xfeat\", \"xfeat-star\", \"xfeat-lighterglue\" or \"dense\""
                 ),
             )),
         }
@@ -156,11 +179,12 @@ pub enum PipelineError {
 pub struct Timings {
     /// Decoding, downscaling to `max_side`, resizing to the network's multiples of 32.
     pub decode: Duration,
-    /// The backbone network(s).
+    /// The backbone network(s), or the dense matcher (with the resizing to its input).
     pub matcher: Duration,
-    /// Keypoints and descriptors from the backbone's maps.
+    /// Keypoints and descriptors from the backbone's maps (0 for a dense matcher).
     pub detection: Duration,
-    /// Mutual nearest neighbours, the refinement model or LighterGlue.
+    /// Mutual nearest neighbours, the refinement model or LighterGlue; a dense matcher's
+    /// balanced sampling.
     pub matching: Duration,
     /// Cutting the 32×32 patches.
     pub patches: Duration,
@@ -206,9 +230,10 @@ pub struct Matches {
     /// sorted by decreasing certainty.
     pub corrs: Vec<[f64; 8]>,
     /// The matcher's certainty of each match (MNN: cosine similarity; XFeat*: refinement
-    /// confidence; LighterGlue: match score), higher is better.
+    /// confidence; LighterGlue: match score; dense: the certainty map), higher is better.
     pub certainty: Vec<f64>,
-    /// Keypoints (or semi-dense cells) found in image A and in image B.
+    /// Keypoints (or semi-dense cells) found in image A and in image B; for a dense matcher the
+    /// cells of its grid with certainty > 0 that warp into B (the same number twice).
     pub num_keypoints: (usize, usize),
     /// Wall time per stage.
     pub timings: Timings,
@@ -275,6 +300,19 @@ impl<'a> ImageSource<'a> {
             Self::Path(p) => GrayImage::open(p).map(Cow::Owned),
         }
     }
+
+    /// The gray image and the colour one a dense matcher takes, decoded once (a gray image
+    /// gives R = G = B).
+    fn load_with_colour(self) -> Result<(Cow<'a, GrayImage>, RgbImage)> {
+        match self {
+            Self::Image(img) => Ok((Cow::Borrowed(img), RgbImage::from_gray(img))),
+            Self::Path(p) => {
+                let (img, name) = open_dynamic(p)?;
+                let gray = gray_from_dynamic(&img, &name)?;
+                Ok((Cow::Owned(gray), RgbImage::from_dynamic(&img)))
+            }
+        }
+    }
 }
 
 /// Builds a [`Pipeline`]; see each method for its default.
@@ -285,12 +323,14 @@ pub struct PipelineBuilder {
     backbone: Option<PathBuf>,
     refine: Option<PathBuf>,
     lighterglue: Option<PathBuf>,
+    dense: Option<PathBuf>,
     shape: Option<PathBuf>,
     max_keypoints: Option<usize>,
     max_matches: Option<usize>,
     max_side: Option<usize>,
     threads: Option<usize>,
     shape_batch_size: usize,
+    seed: u64,
 }
 
 impl Default for PipelineBuilder {
@@ -301,12 +341,14 @@ impl Default for PipelineBuilder {
             backbone: None,
             refine: None,
             lighterglue: None,
+            dense: None,
             shape: None,
             max_keypoints: None,
             max_matches: None,
             max_side: None,
             threads: None,
             shape_batch_size: crate::shape::DEFAULT_BATCH_SIZE,
+            seed: 0,
         }
     }
 }
@@ -344,6 +386,22 @@ impl PipelineBuilder {
         self
     }
 
+    /// A dense matcher (`dense-warp-v1`, e.g. a DKM or RoMa export; docs/matchers.md), and
+    /// selects [`Matcher::Dense`]. No XFeat model is loaded then. Without this call a dense
+    /// pipeline looks for `dense.onnx` in [`Self::models_dir`].
+    pub fn dense_matcher(mut self, path: impl Into<PathBuf>) -> Self {
+        self.dense = Some(path.into());
+        self.matcher = Matcher::Dense;
+        self
+    }
+
+    /// Seed of a dense matcher's balanced sampling (default 0): a seed gives the same matches
+    /// on every run and thread count.
+    pub fn seed(mut self, seed: u64) -> Self {
+        self.seed = seed;
+        self
+    }
+
     /// The shape network (`shape-v1`).
     pub fn shape_model(mut self, path: impl Into<PathBuf>) -> Self {
         self.shape = Some(path.into());
@@ -358,7 +416,8 @@ impl PipelineBuilder {
         self
     }
 
-    /// Keep at most this many matches, the most certain. Default: all.
+    /// Keep at most this many matches, the most certain. Default: all. A dense matcher draws
+    /// this many (default [`DEFAULT_DENSE_MATCHES`]).
     pub fn max_matches(mut self, n: usize) -> Self {
         self.max_matches = Some(n);
         self
@@ -414,11 +473,21 @@ impl PipelineBuilder {
             ));
         }
         let threads = crate::contract::resolve_threads(self.threads)?;
-        let backbone = Backbone::load(
-            self.path(&self.backbone, BACKBONE_FILE, "backbone_model")?,
-            Some(threads),
-        )?;
-        let dim = backbone.config().descriptor_dim;
+        let dense = match self.matcher {
+            Matcher::Dense => Some(DenseMatcher::load(
+                self.path(&self.dense, DENSE_FILE, "dense_matcher")?,
+                Some(threads),
+            )?),
+            _ => None,
+        };
+        let backbone = match self.matcher {
+            Matcher::Dense => None,
+            _ => Some(Backbone::load(
+                self.path(&self.backbone, BACKBONE_FILE, "backbone_model")?,
+                Some(threads),
+            )?),
+        };
+        let dim = backbone.as_ref().map_or(0, |b| b.config().descriptor_dim);
         let refine = match self.matcher {
             Matcher::XFeatStar => {
                 let r = RefineModel::load(
@@ -455,15 +524,26 @@ impl PipelineBuilder {
             .map_err(|e| {
                 RunnerError::invalid("threads", format!("cannot start the thread pool: {e}"))
             })?;
-        let max_keypoints = self.max_keypoints.unwrap_or(backbone.config().top_k);
+        let (max_keypoints, max_matches) = match &backbone {
+            Some(b) => (
+                self.max_keypoints.unwrap_or(b.config().top_k),
+                self.max_matches,
+            ),
+            None => {
+                let n = self.max_matches.unwrap_or(DEFAULT_DENSE_MATCHES);
+                (n, Some(n))
+            }
+        };
         Ok(Pipeline {
             matcher: self.matcher,
             backbone,
             refine,
             lighterglue,
+            dense,
             shape,
             max_keypoints,
-            max_matches: self.max_matches,
+            max_matches,
+            seed: self.seed,
             max_side: self.max_side,
             threads,
             pool,
@@ -489,12 +569,15 @@ fn check_dim(what: &'static str, source: &str, got: usize, want: usize) -> Resul
 #[derive(Debug)]
 pub struct Pipeline {
     matcher: Matcher,
-    backbone: Backbone,
+    /// The XFeat backbone (every matcher but the dense one).
+    backbone: Option<Backbone>,
     refine: Option<RefineModel>,
     lighterglue: Option<LighterGlue>,
+    dense: Option<DenseMatcher>,
     shape: ShapeEstimator,
     max_keypoints: usize,
     max_matches: Option<usize>,
+    seed: u64,
     max_side: Option<usize>,
     threads: usize,
     pool: rayon::ThreadPool,
@@ -531,7 +614,7 @@ impl Pipeline {
         self.matcher
     }
 
-    /// Keypoints (or semi-dense cells) per image.
+    /// Keypoints (or semi-dense cells) per image; for a dense matcher the matches it draws.
     pub fn max_keypoints(&self) -> usize {
         self.max_keypoints
     }
@@ -551,9 +634,19 @@ impl Pipeline {
         self.threads
     }
 
-    /// The backbone.
-    pub fn backbone(&self) -> &Backbone {
-        &self.backbone
+    /// The XFeat backbone (`None` for a dense matcher).
+    pub fn backbone(&self) -> Option<&Backbone> {
+        self.backbone.as_ref()
+    }
+
+    /// The dense matcher (`Some` for [`Matcher::Dense`]).
+    pub fn dense_matcher(&self) -> Option<&DenseMatcher> {
+        self.dense.as_ref()
+    }
+
+    /// The seed of the dense matcher's sampling.
+    pub fn seed(&self) -> u64 {
+        self.seed
     }
 
     /// The shape network.
@@ -694,17 +787,25 @@ impl Pipeline {
         let start = Instant::now();
         let mut t = start;
         let mut timings = Timings::default();
-        let img_a = a.load().map_err(|e| name_image(e, "image_a"))?;
-        let img_b = b.load().map_err(|e| name_image(e, "image_b"))?;
+        let (img_a, img_b, colour) = if self.dense.is_some() {
+            let (ga, ca) = a.load_with_colour().map_err(|e| name_image(e, "image_a"))?;
+            let (gb, cb) = b.load_with_colour().map_err(|e| name_image(e, "image_b"))?;
+            (ga, gb, Some((ca, cb)))
+        } else {
+            let ga = a.load().map_err(|e| name_image(e, "image_a"))?;
+            let gb = b.load().map_err(|e| name_image(e, "image_b"))?;
+            (ga, gb, None)
+        };
         let (work_a, sa) = self.limit_side(&img_a);
         let (work_b, sb) = self.limit_side(&img_b);
         timings.decode += elapsed(&mut t);
 
-        let raw = match self.matcher {
-            Matcher::XFeatMnn | Matcher::XFeatLighterGlue => {
-                self.match_sparse(&work_a, &work_b, &mut timings)?
+        let raw = match (self.matcher, &colour) {
+            (Matcher::Dense, Some((ca, cb))) => {
+                self.match_dense(ca, cb, &work_a, &work_b, &mut timings)?
             }
-            Matcher::XFeatStar => self.match_star(&work_a, &work_b, &mut timings)?,
+            (Matcher::XFeatStar, _) => self.match_star(&work_a, &work_b, &mut timings)?,
+            _ => self.match_sparse(&work_a, &work_b, &mut timings)?,
         };
         let mut t = Instant::now();
 
@@ -793,14 +894,64 @@ impl Pipeline {
         }
     }
 
+    /// The XFeat backbone; only called for the XFeat matchers, which load it.
+    fn xfeat(&self) -> &Backbone {
+        self.backbone
+            .as_ref()
+            .expect("XFeat pipelines load the backbone")
+    }
+
+    /// A dense matcher's balanced sample, in pixels of the working images `a`, `b` (the warp's
+    /// coordinates are resolution-free, so the colour images need not be downscaled).
+    fn match_dense(
+        &self,
+        colour_a: &RgbImage,
+        colour_b: &RgbImage,
+        a: &GrayImage,
+        b: &GrayImage,
+        timings: &mut Timings,
+    ) -> Result<RawMatches> {
+        let dense = self
+            .dense
+            .as_ref()
+            .expect("dense pipelines load the dense matcher");
+        let mut t = Instant::now();
+        let warp = dense.run(colour_a, colour_b)?;
+        timings.matcher += elapsed(&mut t);
+        let sample = balanced_sample(
+            &warp,
+            &SamplingOptions {
+                num: self.max_keypoints,
+                seed: self.seed,
+                ..Default::default()
+            },
+        )?;
+        let (x1, x2) = warp.to_pixels(
+            &sample.index,
+            (a.width(), a.height()),
+            (b.width(), b.height()),
+        );
+        let to_f32 = |p: Vec<[f64; 2]>| -> Vec<[f32; 2]> {
+            p.into_iter().map(|[x, y]| [x as f32, y as f32]).collect()
+        };
+        let raw = RawMatches {
+            x1: to_f32(x1),
+            x2: to_f32(x2),
+            certainty: sample.certainty,
+            num_keypoints: (sample.candidates, sample.candidates),
+        };
+        timings.matching += elapsed(&mut t);
+        Ok(raw)
+    }
+
     fn sparse_features(&self, img: &GrayImage, timings: &mut Timings) -> Result<SparseFeatures> {
         let mut t = Instant::now();
-        let cfg = self.backbone.config();
+        let cfg = self.xfeat().config();
         let (data, h, w) = plane(img);
         let input = preprocess(data, h, w, cfg.input_multiple)?;
         timings.decode += elapsed(&mut t);
         let maps = self
-            .backbone
+            .xfeat()
             .run(&input.data, input.height, input.width, true)?;
         timings.matcher += elapsed(&mut t);
         let f = detect_and_compute(
@@ -853,7 +1004,7 @@ impl Pipeline {
 
     fn dense_features(&self, img: &GrayImage, timings: &mut Timings) -> Result<DenseFeatures> {
         let mut t = Instant::now();
-        let cfg = self.backbone.config();
+        let cfg = self.xfeat().config();
         let (data, h, w) = plane(img);
         let inputs = star_scale_inputs(data, h, w, &cfg.semidense_scales, cfg.input_multiple)?;
         let split = dense_split(self.max_keypoints, &cfg.semidense_split);
@@ -861,7 +1012,7 @@ impl Pipeline {
         let mut f = DenseFeatures::default();
         for ((s, input), k) in inputs.iter().zip(split) {
             let maps = self
-                .backbone
+                .xfeat()
                 .run(&input.data, input.height, input.width, false)?;
             timings.matcher += elapsed(&mut t);
             f.push_scale(&maps, k, (input.rh, input.rw), *s);

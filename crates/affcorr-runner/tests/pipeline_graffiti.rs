@@ -17,22 +17,10 @@ fn graffiti() -> &'static (GrayImage, GrayImage, Mat3) {
     static DATA: OnceLock<(GrayImage, GrayImage, Mat3)> = OnceLock::new();
     DATA.get_or_init(|| {
         let dir = common::root().join("data/graffiti");
-        let xml = std::fs::read_to_string(dir.join("H1to3p.xml")).unwrap();
-        let body = xml
-            .split("<data>")
-            .nth(1)
-            .unwrap()
-            .split("</data>")
-            .next()
-            .unwrap();
-        let v: Vec<f64> = body
-            .split_whitespace()
-            .map(|s| s.parse().unwrap())
-            .collect();
         (
             GrayImage::open(dir.join("graf1.png")).unwrap(),
             GrayImage::open(dir.join("graf3.png")).unwrap(),
-            Mat3::from_row_slice(&v),
+            Mat3::from_row_slice(&common::graffiti_homography()),
         )
     })
 }

@@ -5,7 +5,8 @@
 //! - [`solvers`]: minimal and non-minimal solvers.
 //! - [`ransac`]: robust estimation of H, F and relative pose from points or ACs.
 //! - [`runner`]: ONNX Runtime runner: image decoding, the XFeat matchers (MNN, XFeat*,
-//!   LighterGlue), 32×32 patch extraction and the shape network (images + matches → ACs
+//!   LighterGlue), dense `dense-warp-v1` matchers (DKM, RoMa exports) with DKM's balanced
+//!   sampling, 32×32 patch extraction and the shape network (images + matches → ACs
 //!   `A = S_AB·R(O_AB)·A′(A″)`).
 //! - [`Pipeline`]: images → matches → ACs → homography / relative pose, timed per stage
 //!   (re-exported from [`runner::pipeline`]).
@@ -25,3 +26,4 @@ pub use affcorr_solvers as solvers;
 pub use affcorr_runner::pipeline::{
     Estimated, ImageSource, Matcher, Matches, Pipeline, PipelineBuilder, PipelineError, Timings,
 };
+pub use affcorr_runner::{DenseMatcher, RgbImage, SamplingOptions};

@@ -35,3 +35,19 @@ pub fn ort_library() -> PathBuf {
 pub fn init() {
     affcorr_runner::init_ort(Some(&ort_library())).expect("ONNX Runtime loads");
 }
+
+/// Graffiti's ground-truth homography H1to3p (p3 ~ H p1), row-major, from its OpenCV XML.
+pub fn graffiti_homography() -> [f64; 9] {
+    let xml = std::fs::read_to_string(root().join("data/graffiti/H1to3p.xml"))
+        .expect("data/graffiti/H1to3p.xml is readable");
+    let body = xml
+        .split("<data>")
+        .nth(1)
+        .and_then(|s| s.split("</data>").next())
+        .expect("H1to3p.xml has a <data> element");
+    let v: Vec<f64> = body
+        .split_whitespace()
+        .map(|s| s.parse().expect("H1to3p.xml holds numbers"))
+        .collect();
+    v.try_into().expect("H1to3p.xml holds 9 numbers")
+}
