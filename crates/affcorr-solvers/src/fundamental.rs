@@ -254,7 +254,9 @@ fn cubic_solutions(
         n += write_denormalised(&(f1 + f2 * x), t1, t2, &mut out[n..]);
     }
     let scale = c.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-    if c[3].abs() <= 1e-12 * scale && n < out.len() {
+    // With three roots found, the one near x = ∞ already is (a multiple of) F₂ + F₁/x: a fourth
+    // model would break FUNDAMENTAL_7PT_MAX_SOLUTIONS (found by fuzzing).
+    if c[3].abs() <= 1e-12 * scale && k < 3 && n < out.len() {
         n += write_denormalised(&f2, t1, t2, &mut out[n..]);
     }
     n

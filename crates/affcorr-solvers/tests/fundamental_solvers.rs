@@ -205,3 +205,32 @@ fn degenerate_samples_give_no_model() {
     assert_eq!(fundamental_3ac(&acs[..4], &mut out), 0);
     assert_eq!(fundamental_ac_lsq(&acs[..2], &mut out), 0);
 }
+
+/// Found by fuzzing (fuzz/, target `solvers`): a degenerate sample (repeated points) whose cubic
+/// has a negligible c₃ gave three roots and F₂ as well: 4 models, more than documented.
+#[test]
+fn seven_point_never_returns_more_than_its_maximum() {
+    let v = affcorr_geom::Vec2::new;
+    let x1 = [
+        v(1.0, 1.0),
+        v(1.0, -1.0),
+        v(-1.0, -1.0),
+        v(-1.0, -1.0),
+        v(-1.0, 34.0),
+        v(97.0, 3116.125),
+        v(-0.0, 3116.125),
+    ];
+    let x2 = [
+        v(3116.125, 3116.125),
+        v(3116.125, 3116.125),
+        v(3116.125, 3116.125),
+        v(-0.125, -1.0),
+        v(0.0, 0.0),
+        v(0.0, 0.0),
+        v(0.0, 0.0),
+    ];
+    let mut out = [Mat3::zeros(); 8];
+    let n = fundamental_7pt(&x1, &x2, &mut out);
+    assert!(n <= FUNDAMENTAL_7PT_MAX_SOLUTIONS, "{n} models");
+    assert!(out[..n].iter().all(|f| f.iter().all(|x| x.is_finite())));
+}
