@@ -95,7 +95,15 @@ LABELS = {
     "affcorr-AC": "affcorr (2AC)",
     "affcorr-AC-min200": "affcorr (2AC, >= 200 samples)",
 }
-DATASETS = ["synthetic", "synthetic-common", "chessboard", "chessboard-stereo", "motorcycle"]
+DATASETS = [
+    "synthetic",
+    "synthetic-common",
+    "chessboard",
+    "chessboard-common",
+    "chessboard-stereo",
+    "motorcycle",
+]
+COMMON = ("synthetic", "chessboard")  # datasets whose slow matchers ran on a subset
 
 
 # --- metrics ------------------------------------------------------------------------------------
@@ -441,18 +449,21 @@ def main(argv=None) -> int:
     with tempfile.TemporaryDirectory() as tmp:
         rows = estimate(jobs, Path(tmp), notes, versions)
     log(f"estimation: {len(rows)} rows")
-    # the synthetic pairs every matcher has, as a dataset of their own (like with like)
-    have = defaultdict(set)
-    for j in jobs:
-        if j["pair"].dataset == "synthetic":
-            have[j["matcher"]].add(j["pair"].name)
-    shared = set.intersection(*have.values()) if have else set()
-    counts = {k: len(v) for k, v in have.items()}
-    rows += [
-        {**r, "dataset": "synthetic-common"}
-        for r in rows
-        if r["dataset"] == "synthetic" and r["pair"] in shared
-    ]
+    # the pairs every matcher has, as datasets of their own (like with like)
+    counts, shared_counts = {}, {}
+    for ds in COMMON:
+        have = defaultdict(set)
+        for j in jobs:
+            if j["pair"].dataset == ds:
+                have[j["matcher"]].add(j["pair"].name)
+        shared = set.intersection(*have.values()) if have else set()
+        counts[ds] = {k: len(v) for k, v in have.items()}
+        shared_counts[ds] = len(shared)
+        rows += [
+            {**r, "dataset": f"{ds}-common"}
+            for r in rows
+            if r["dataset"] == ds and r["pair"] in shared
+        ]
     meta = dict(
         command="python benches/eval/pose.py "
         + " ".join(shlex.quote(a) for a in (argv or sys.argv[1:])),
@@ -463,8 +474,8 @@ def main(argv=None) -> int:
         versions=sorted(versions) + [", ".join(f"{k} {v}" for k, v in matchers.versions().items())],
         threshold=THRESHOLD,
         grid=grid,
-        synthetic_pairs=counts,
-        common_pairs=len(shared),
+        pair_counts=counts,
+        common_pairs=shared_counts,
         cached=args.cached,
         unavailable=unavailable,
         notes=notes,
@@ -563,6 +574,7 @@ DATASET_TITLES = {
     "synthetic": "Synthetic multi-plane scenes (MegaDepth-like), all pairs of each matcher",
     "synthetic-common": "Synthetic scenes, the pairs every matcher ran on",
     "chessboard": "opencv-doc chessboard set: pairs of left views (board poses)",
+    "chessboard-common": "opencv-doc chessboard set: the pairs of left views every matcher ran on",
     "chessboard-stereo": "opencv-doc chessboard set: left/right stereo rig",
     "motorcycle": "scikit-image motorcycle stereo pair (Middlebury 2014)",
 }
@@ -600,6 +612,7 @@ def plot(rows: list[dict], out: Path) -> str | None:
                     continue
                 groups[(r["matcher"], r["estimator"])].append(r["pose_err"])
         x = np.linspace(0, 20, 201)
+        colours = {n: f"C{i}" for i, n in enumerate(matchers.NAMES)}
         for (m, est), errs in sorted(groups.items()):
             e = np.asarray(errs)
             style = {"opencv-USAC_MAGSAC": ":", "gcransac-AC": "--", "affcorr-AC": "-"}[est]
@@ -607,6 +620,7 @@ def plot(rows: list[dict], out: Path) -> str | None:
                 x,
                 [np.mean(e <= v) for v in x],
                 style,
+                color="k" if m == "affcorr" else colours.get(m),
                 label=f"{matchers.LABELS.get(m, m)} / {LABELS[est]}",
                 lw=2.2 if m == "affcorr" else 1.2,
             )
@@ -652,13 +666,18 @@ def write(out: Path, rows: list[dict], meta: dict) -> None:
         f"Date: {meta['date']}; {meta['seconds'] / 60:.1f} min; load average {meta['load']}; "
         f"{meta['machine']}  ",
         "Versions: " + "; ".join(meta["versions"]) + "  ",
-        f"Pairs: synthetic: up to {meta['grid']['synthetic']}, every "
-        f"{meta['grid']['slow_every']}th for the slow matchers ({', '.join(sorted(SLOW))}); "
-        "those with matches: "
-        + ", ".join(f"{k} {v}" for k, v in meta["synthetic_pairs"].items())
-        + f"; {meta['common_pairs']} common to all. Chessboard: "
-        f"{meta['grid']['chessboard'] or 'all 78 + 13'} (slow matchers every "
-        f"{meta['grid']['slow_every']}th); motorcycle: 1."
+        "Pairs with matches, per matcher: "
+        + "; ".join(
+            f"{ds}: "
+            + ", ".join(f"{k} {v}" for k, v in meta["pair_counts"][ds].items())
+            + f" ({meta['common_pairs'][ds]} common to all)"
+            for ds in COMMON
+        )
+        + f"; chessboard stereo 13 (slow matchers: 1), motorcycle 1. Full grid: synthetic "
+        f"{meta['grid']['synthetic']} (slow matchers {', '.join(sorted(SLOW))}: every "
+        f"{meta['grid']['slow_every']}th), chessboard "
+        f"{meta['grid']['chessboard'] or 'all 78 + 13'} (slow: every "
+        f"{meta['grid']['chess_slow_every']}th)."
         + (" Estimated on the matches cached by `--match-only` runs." if meta["cached"] else ""),
         "",
         f"Every estimator gets the same matches and the same threshold, {meta['threshold']} px "
