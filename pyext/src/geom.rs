@@ -64,12 +64,14 @@ fn synthesize_affine<'py>(
     to_numpy(py, &[out.len(), 2, 2], flatten(out))
 }
 
+// Capital argument names, as documented (`decompose_affine(A=...)` must work).
 #[pyfunction]
+#[allow(non_snake_case)]
 fn decompose_affine<'py>(
     py: Python<'py>,
-    a: &Bound<'py, PyAny>,
+    A: &Bound<'py, PyAny>,
 ) -> PyResult<(Array<'py>, Array<'py>, Array<'py>)> {
-    let a = F64Array::extract(a, "A")?.expect(&[N, Dim::Is(2), Dim::Is(2)])?;
+    let a = F64Array::extract(A, "A")?.expect(&[N, Dim::Is(2), Dim::Is(2)])?;
     let a = a.rows::<4>();
     let blank = AffineShape {
         orientation: 0.0,
@@ -93,12 +95,13 @@ fn decompose_affine<'py>(
 
 #[pyfunction]
 #[pyo3(name = "affine_from_homography")]
+#[allow(non_snake_case)]
 fn affine_from_homography<'py>(
     py: Python<'py>,
-    h: &Bound<'py, PyAny>,
+    H: &Bound<'py, PyAny>,
     x1: &Bound<'py, PyAny>,
 ) -> PyResult<Array<'py>> {
-    let h = matrix3(h, "H")?;
+    let h = matrix3(H, "H")?;
     let x1 = F64Array::extract(x1, "x1")?.expect(&[N, Dim::Is(2)])?;
     let x1 = x1.rows::<2>();
     let mut out = vec![[0.0; 4]; x1.len()];
@@ -108,12 +111,13 @@ fn affine_from_homography<'py>(
 }
 
 #[pyfunction]
+#[allow(non_snake_case)]
 fn correspondences_from_homography<'py>(
     py: Python<'py>,
-    h: &Bound<'py, PyAny>,
+    H: &Bound<'py, PyAny>,
     x1: &Bound<'py, PyAny>,
 ) -> PyResult<Array<'py>> {
-    let h = matrix3(h, "H")?;
+    let h = matrix3(H, "H")?;
     let x1 = F64Array::extract(x1, "x1")?.expect(&[N, Dim::Is(2)])?;
     let x1 = x1.rows::<2>();
     let mut out = vec![[0.0; 8]; x1.len()];
@@ -124,14 +128,15 @@ fn correspondences_from_homography<'py>(
 
 #[pyfunction]
 #[pyo3(name = "normalize_correspondences")]
+#[allow(non_snake_case)]
 fn normalize_correspondences<'py>(
     py: Python<'py>,
     corrs: &Bound<'py, PyAny>,
-    k1: &Bound<'py, PyAny>,
-    k2: &Bound<'py, PyAny>,
+    K1: &Bound<'py, PyAny>,
+    K2: &Bound<'py, PyAny>,
 ) -> PyResult<Array<'py>> {
     let c = F64Array::extract(corrs, "corrs")?.expect(&[N, Dim::Is(8)])?;
-    let (k1, k2) = (intrinsics(k1, "K1")?, intrinsics(k2, "K2")?);
+    let (k1, k2) = (intrinsics(K1, "K1")?, intrinsics(K2, "K2")?);
     let rows = c.rows::<8>();
     let mut out = vec![[0.0; 8]; rows.len()];
     py.detach(|| camera::normalize_correspondences(rows, &k1, &k2, &mut out))
@@ -168,12 +173,19 @@ fn laf_to_affine<'py>(
 }
 
 #[pyfunction]
-#[pyo3(signature = (corrs, radius = 1.0))]
+#[pyo3(signature = (corrs, radius = None))]
 fn affine_to_laf<'py>(
     py: Python<'py>,
     corrs: &Bound<'py, PyAny>,
-    radius: f64,
+    radius: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<(Array<'py>, Array<'py>)> {
+    // Not a bare `f64` argument: PyO3's TypeError for a string would not name `radius`.
+    let radius: f64 = match radius {
+        None => 1.0,
+        Some(r) => r
+            .extract()
+            .map_err(|_| value_error(format!("radius must be a number, got {r}")))?,
+    };
     let c = F64Array::extract(corrs, "corrs")?.expect(&[N, Dim::Is(8)])?;
     let rows = c.rows::<8>();
     let n = rows.len();

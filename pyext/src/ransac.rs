@@ -21,7 +21,8 @@ use affcorr::geom::Mat3;
 use affcorr::geom::camera::Intrinsics;
 use affcorr::ransac::problems::relpose::PoseModel;
 use affcorr::ransac::{
-    Correspondences, Estimate, EstimatorOptions, RansacError, SampleKind, SamplerKind, ScoringKind,
+    Correspondences, Estimate, EstimatorOptions, LoKind, RansacError, SampleKind, SamplerKind,
+    ScoringKind,
     estimate_fundamental, estimate_homography, estimate_relative_pose,
 };
 use numpy::{PyArray1, PyArrayDyn};
@@ -85,6 +86,7 @@ estimator_options! {
     "min_iterations" => |o, v| o.ransac.min_iterations = integer(v, "min_iterations")?;
     "max_iterations" => |o, v| o.ransac.max_iterations = integer(v, "max_iterations")?;
     "local_optimization" => |o, v| o.ransac.local_optimization = flag(v, "local_optimization")?;
+    "lo" => |o, v| o.ransac.lo = choice(v, "lo", LOS)?;
     "lo_iterations" => |o, v| o.ransac.lo_iterations = integer(v, "lo_iterations")?;
     "final_refinement" => |o, v| o.ransac.final_refinement = flag(v, "final_refinement")?;
     "sprt" => |o, v| o.ransac.sprt = flag(v, "sprt")?;
@@ -99,6 +101,7 @@ const SAMPLERS: &[(&str, SamplerKind)] = &[
     ("uniform", SamplerKind::Uniform),
     ("prosac", SamplerKind::Prosac),
 ];
+const LOS: &[(&str, LoKind)] = &[("irls", LoKind::Irls), ("graph_cut", LoKind::GraphCut)];
 const SCORINGS: &[(&str, ScoringKind)] = &[
     ("auto", ScoringKind::Auto),
     ("msac", ScoringKind::Msac),
@@ -422,6 +425,13 @@ fn read_batch<'py>(
         }
     }
     if let Some(p) = pair_options.filter(|p| !p.is_none()) {
+        // A dict or a string iterates, but over keys / characters: say what was meant.
+        if p.is_instance_of::<PyDict>() || p.is_instance_of::<pyo3::types::PyString>() {
+            return Err(PyValueError::new_err(format!(
+                "pair_options must be a sequence with one dict (or None) per pair, got a {}",
+                p.get_type().name()?
+            )));
+        }
         let list: Vec<Bound<'py, PyAny>> = p
             .try_iter()
             .map_err(|_| {
