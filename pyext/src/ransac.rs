@@ -22,8 +22,7 @@ use affcorr::geom::camera::Intrinsics;
 use affcorr::ransac::problems::relpose::PoseModel;
 use affcorr::ransac::{
     Correspondences, Estimate, EstimatorOptions, LoKind, RansacError, SampleKind, SamplerKind,
-    ScoringKind,
-    estimate_fundamental, estimate_homography, estimate_relative_pose,
+    ScoringKind, estimate_fundamental, estimate_homography, estimate_relative_pose,
 };
 use numpy::{PyArray1, PyArrayDyn};
 use pyo3::exceptions::PyValueError;

@@ -32,6 +32,12 @@ loop with adaptive termination, local optimisation and a final refinement (DESIG
   ``min_iterations``     ``0``        never fewer iterations
   ``max_iterations``     ``10000``    never more iterations
   ``local_optimization`` ``True``     iterated least squares on the inliers of each new best
+  ``lo``                 ``"irls"``   how each local-optimisation step picks the data it
+                                      refits on: ``"irls"`` (those below the step's threshold)
+                                      or ``"graph_cut"`` (GC-RANSAC: the minimum cut of data
+                                      term + Potts spatial coherence on a grid neighbourhood
+                                      of ``(x1, y1, x2, y2)``, so neighbours pull data just
+                                      beyond the threshold in and push isolated ones out)
   ``lo_iterations``      ``10``       most refits in one local optimisation
   ``final_refinement``   ``True``     polish the final model on its inliers
   ``sprt``               ``True``     verify hypotheses with Wald's SPRT (random order, adaptive

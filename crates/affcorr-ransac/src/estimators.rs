@@ -163,7 +163,14 @@ pub fn estimate_relative_pose(
     opts: &EstimatorOptions,
 ) -> Result<Estimate<PoseModel>> {
     let kind = sample_kind(data, opts)?;
-    let problem = RelativePoseProblem::new(data, *k1, *k2, kind, opts.affine_weight);
+    let problem = RelativePoseProblem::new(
+        data,
+        *k1,
+        *k2,
+        kind,
+        opts.affine_weight,
+        opts.ransac.threshold,
+    );
     let mut est = run(&problem, opts, ScoringKind::Magsac)?;
     let idx: Vec<usize> = (0..data.len()).filter(|&i| est.inliers[i]).collect();
     let (x1, x2): (Vec<_>, Vec<_>) = idx

@@ -5,6 +5,8 @@
 //! - [`problem`]: the [`Problem`] trait: data, minimal/non-minimal solvers, residuals, refinement.
 //! - [`sampler`]: uniform and PROSAC sampling.
 //! - [`score`]: MSAC and MAGSAC++ scoring with an exact bail-out.
+//! - [`graph_cut`]: inlier labelling by a minimum cut with spatial coherence (GC-RANSAC's
+//!   local optimisation).
 //! - [`refine`]: Levenberg–Marquardt with robust losses, used by local optimisation and the
 //!   final refinement.
 //! - [`engine`]: the loop: adaptive termination, the SPRT, local optimisation, final
@@ -17,6 +19,7 @@
 pub mod engine;
 pub mod error;
 pub mod estimators;
+pub mod graph_cut;
 pub mod options;
 pub mod problem;
 pub mod problems;
@@ -31,6 +34,6 @@ pub use estimators::{
     estimate_fundamental_batch, estimate_homography, estimate_homography_batch,
     estimate_relative_pose, estimate_relative_pose_batch,
 };
-pub use options::RansacOptions;
+pub use options::{LoKind, RansacOptions};
 pub use problem::Problem;
 pub use problems::{Correspondences, SampleKind};

@@ -1,5 +1,17 @@
 //! Options of the robust estimator, with their defaults.
 
+/// How local optimisation picks the data it refits on at each step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LoKind {
+    /// Iterated re-weighted least squares on the data below each step's threshold (default).
+    #[default]
+    Irls,
+    /// The same schedule, but each step's inliers are the minimum-energy labelling of a graph
+    /// cut with spatial coherence (GC-RANSAC; [`crate::graph_cut`]): neighbours in (x1, x2) pull
+    /// data just beyond the threshold in and push isolated data just below it out.
+    GraphCut,
+}
+
 /// Options of [`crate::engine::estimate`]. Defaults are documented at each field.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RansacOptions {
@@ -16,6 +28,9 @@ pub struct RansacOptions {
     /// Run local optimisation (iterated least squares on the inliers) on every new best model.
     /// Default true.
     pub local_optimization: bool,
+    /// How local optimisation selects its data: [`LoKind::Irls`] (default) or
+    /// [`LoKind::GraphCut`].
+    pub lo: LoKind,
     /// Most least-squares refits in one local optimisation. Default 10.
     pub lo_iterations: usize,
     /// Polish the final model with the problem's refinement (Levenberg–Marquardt). Default true.
@@ -39,6 +54,7 @@ impl Default for RansacOptions {
             max_iterations: 10_000,
             seed: 0,
             local_optimization: true,
+            lo: LoKind::Irls,
             lo_iterations: 10,
             final_refinement: true,
             sprt: true,

@@ -5,6 +5,7 @@
 //! the data itself: samplers, scoring and local optimisation vary independently of the problem.
 
 use crate::refine::Loss;
+use affcorr_geom::Vec2;
 
 /// A hypothesise-and-verify problem.
 pub trait Problem: Sync {
@@ -41,6 +42,13 @@ pub trait Problem: Sync {
         for (o, &i) in out.iter_mut().zip(indices) {
             self.residuals(model, i, std::slice::from_mut(o));
         }
+    }
+
+    /// Pixel positions (x1, x2) of the data, for the neighbourhood graph of graph-cut local
+    /// optimisation; `None` (the default) when the data have none, which makes
+    /// [`crate::options::LoKind::GraphCut`] an error.
+    fn positions(&self) -> Option<(&[Vec2], &[Vec2])> {
+        None
     }
 
     /// Cost of fitting one minimal sample (all its models) in units of one residual: the SPRT's

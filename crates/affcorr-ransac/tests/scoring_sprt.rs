@@ -174,14 +174,12 @@ fn compare_scorings(kind: Kind, scale: f64, min_recall: f64) -> (f64, f64) {
 
 /// At the nominal threshold (3σ of the residual) MSAC followed by unit-weight least squares on
 /// the inliers is already the Gaussian maximum-likelihood estimate, so MAGSAC++ (which
-/// down-weights residuals near the threshold) can only match it: on these scenes it is better
-/// for the relative pose and within 30% for H and F (measured: pose 0.0143° vs 0.0152°, H 0.065
-/// vs 0.061 px, F 0.056 vs 0.050 px).
+/// down-weights residuals near the threshold) can only match it: within 30% on these scenes
+/// (measured: pose 0.0172° vs 0.0167° since pose residuals reject points behind a camera,
+/// which used to pull MSAC's rotation; H 0.065 vs 0.061 px, F 0.056 vs 0.050 px).
 #[test]
 fn magsac_at_the_nominal_threshold_matches_msac() {
-    let (m0, m1) = compare_scorings(Kind::Pose, 1.0, 0.99);
-    assert!(m1 <= m0, "pose: MAGSAC++ {m1}° vs MSAC {m0}°");
-    for kind in [Kind::H, Kind::F] {
+    for kind in [Kind::Pose, Kind::H, Kind::F] {
         let (m0, m1) = compare_scorings(kind, 1.0, 0.99);
         assert!(m1 <= 1.3 * m0, "{kind:?}: MAGSAC++ {m1} vs MSAC {m0}");
     }
@@ -189,10 +187,10 @@ fn magsac_at_the_nominal_threshold_matches_msac() {
 
 /// With a loose threshold (3× nominal), MSAC lets near-threshold outliers pull the model with
 /// full weight; MAGSAC++ marginalises the noise scale and keeps its accuracy (measured: pose
-/// 0.034° vs 0.074°, F 0.063 vs 0.150 px, H 0.0615 vs 0.0610 px).
+/// 0.0275° vs 0.0438°, F 0.063 vs 0.150 px, H 0.0615 vs 0.0610 px).
 #[test]
 fn magsac_at_a_loose_threshold_beats_msac() {
-    for (kind, factor) in [(Kind::Pose, 0.5), (Kind::F, 0.7), (Kind::H, 1.05)] {
+    for (kind, factor) in [(Kind::Pose, 0.7), (Kind::F, 0.7), (Kind::H, 1.05)] {
         let (m0, m1) = compare_scorings(kind, 3.0, 0.0);
         assert!(m1 <= factor * m0, "{kind:?}: MAGSAC++ {m1} vs MSAC {m0}");
     }

@@ -6,7 +6,7 @@
 
 use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
 use affcorr_ransac::{
-    Correspondences, EstimatorOptions, RansacOptions, SampleKind, SamplerKind,
+    Correspondences, EstimatorOptions, LoKind, RansacOptions, SampleKind, SamplerKind,
     estimate_fundamental, estimate_homography, estimate_relative_pose,
 };
 use rand::SeedableRng;
@@ -237,4 +237,66 @@ fn batch_options_per_pair_and_no_model_iterations() {
         Err(affcorr_ransac::RansacError::NoModel { iterations }) => assert_eq!(iterations, 37),
         other => panic!("expected NoModel, got {:?}", other.map(|e| e.num_inliers)),
     }
+}
+
+/// Precision of `found` against `truth`.
+fn precision(truth: &[bool], found: &[bool]) -> f64 {
+    let tp = truth.iter().zip(found).filter(|(t, f)| **t && **f).count();
+    tp as f64 / found.iter().filter(|f| **f).count().max(1) as f64
+}
+
+#[test]
+fn graph_cut_lo_recovers_the_inliers_at_least_as_well_as_irls() {
+    // A tight threshold (2σ of the pixel noise) at 60% outliers: thresholding alone misses the
+    // true inliers beyond 2σ, which neighbours can pull in.
+    let mut rng = Pcg64::seed_from_u64(21);
+    let (mut sums_irls, mut sums_gc) = ([0.0; 3], [0.0; 3]);
+    let trials = 6;
+    for trial in 0..trials {
+        let scene = PlaneScene::random(&mut rng);
+        let h = make_data(&mut rng, &scene, 1, 1500, 0.6, 0.5, 0.02);
+        let e = make_data(&mut rng, &scene, 6, 1500, 0.6, 0.5, 0.02);
+        for (lo, sums) in [
+            (LoKind::Irls, &mut sums_irls),
+            (LoKind::GraphCut, &mut sums_gc),
+        ] {
+            let mut o = options(1.0, SampleKind::Affine, trial);
+            o.ransac.lo = lo;
+            let est = estimate_homography(&h.data, &o).unwrap();
+            sums[0] += recall(&h.is_inlier, &est.inliers);
+            sums[1] += transfer_error(&est.model, &scene.homography(), 40);
+            let est = estimate_relative_pose(&e.data, &scene.k1, &scene.k2, &o).unwrap();
+            sums[0] += recall(&e.is_inlier, &est.inliers);
+            assert!(precision(&e.is_inlier, &est.inliers) > 0.98, "{lo:?}");
+            sums[2] += angle_deg(&(est.model.pose.r * scene.pose.r.transpose()));
+        }
+    }
+    let mean = |s: [f64; 3]| s.map(|v| v / trials as f64);
+    let (irls, gc) = (mean(sums_irls), mean(sums_gc));
+    // recall summed over H and pose (2 per trial), H transfer error (px), rotation error (°).
+    assert!(
+        gc[0] >= irls[0] - 0.005,
+        "recall: graph cut {gc:?} vs IRLS {irls:?}"
+    );
+    assert!(gc[0] > 2.0 * 0.8, "{gc:?}");
+    assert!(gc[1] <= 1.2 * irls[1] + 0.01, "H error: {gc:?} vs {irls:?}");
+    assert!(
+        gc[2] <= 1.2 * irls[2] + 0.005,
+        "rotation error: {gc:?} vs {irls:?}"
+    );
+    eprintln!("graph cut {gc:?}, IRLS {irls:?}");
+}
+
+#[test]
+fn graph_cut_lo_is_deterministic() {
+    let mut rng = Pcg64::seed_from_u64(22);
+    let scene = PlaneScene::random(&mut rng);
+    let d = make_data(&mut rng, &scene, 3, 800, 0.5, 0.5, 0.02);
+    let mut o = options(1.5, SampleKind::Affine, 4);
+    o.ransac.lo = LoKind::GraphCut;
+    let a = estimate_fundamental(&d.data, &o).unwrap();
+    let b = estimate_fundamental(&d.data, &o).unwrap();
+    assert_eq!(a.model, b.model);
+    assert_eq!(a.inliers, b.inliers);
+    assert!(a.lo_runs >= 1);
 }

@@ -83,6 +83,20 @@ impl<'a> FundamentalProblem<'a> {
     }
 }
 
+/// Squared Sampson residual (point, plus weighted affine) of datum `i` under `f`.
+#[inline(always)]
+fn epipolar_residual(data: &Correspondences, f: &Mat3, affine_weight: f64, i: usize) -> f64 {
+    let points = PointCorrespondence {
+        x1: data.x1[i],
+        x2: data.x2[i],
+    };
+    if affine_weight == 0.0 {
+        return sampson_point(f, &points);
+    }
+    let [a0, a1] = sampson_affine(f, &data.ac(i));
+    sampson_point(f, &points) + affine_weight * (a0 + a1)
+}
+
 /// Squared Sampson residuals (point, plus weighted affine) of `data[start..]` under `f`.
 pub(crate) fn epipolar_residuals(
     data: &Correspondences,
@@ -91,18 +105,21 @@ pub(crate) fn epipolar_residuals(
     start: usize,
     out: &mut [f64],
 ) {
-    let end = start + out.len();
-    let (x1, x2) = (&data.x1[start..end], &data.x2[start..end]);
-    if affine_weight == 0.0 {
-        for ((o, p), q) in out.iter_mut().zip(x1).zip(x2) {
-            *o = sampson_point(f, &PointCorrespondence { x1: *p, x2: *q });
-        }
-        return;
-    }
     for (k, o) in out.iter_mut().enumerate() {
-        let ac = data.ac(start + k);
-        let [a0, a1] = sampson_affine(f, &ac);
-        *o = sampson_point(f, &ac.points()) + affine_weight * (a0 + a1);
+        *o = epipolar_residual(data, f, affine_weight, start + k);
+    }
+}
+
+/// [`epipolar_residuals`] of the data `indices`, in their order (the SPRT's random order).
+pub(crate) fn epipolar_residuals_at(
+    data: &Correspondences,
+    f: &Mat3,
+    affine_weight: f64,
+    indices: &[usize],
+    out: &mut [f64],
+) {
+    for (o, &i) in out.iter_mut().zip(indices) {
+        *o = epipolar_residual(data, f, affine_weight, i);
     }
 }
 
@@ -111,6 +128,10 @@ impl Problem for FundamentalProblem<'_> {
 
     fn len(&self) -> usize {
         self.data.len()
+    }
+
+    fn positions(&self) -> Option<(&[Vec2], &[Vec2])> {
+        Some((&self.data.x1, &self.data.x2))
     }
 
     fn sample_size(&self) -> usize {
@@ -157,6 +178,10 @@ impl Problem for FundamentalProblem<'_> {
 
     fn residuals(&self, f: &Mat3, start: usize, out: &mut [f64]) {
         epipolar_residuals(self.data, f, self.affine_weight, start, out);
+    }
+
+    fn residuals_at(&self, f: &Mat3, indices: &[usize], out: &mut [f64]) {
+        epipolar_residuals_at(self.data, f, self.affine_weight, indices, out);
     }
 
     /// Levenberg–Marquardt on the rank-2 manifold of the Sampson error.

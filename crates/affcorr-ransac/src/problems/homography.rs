@@ -35,6 +35,25 @@ impl<'a> HomographyProblem<'a> {
     }
 }
 
+impl HomographyProblem<'_> {
+    /// Squared residual of datum `i` (see the module docs).
+    #[inline(always)]
+    fn residual(&self, h: &Mat3, i: usize) -> f64 {
+        let (r2, x2h, inv_w) = transfer(h, &self.data.x1[i], &self.data.x2[i]);
+        if self.affine_weight == 0.0 {
+            return r2;
+        }
+        // A_H(x1) = (H[0:2,0:2] − x2·H[2,0:2]) / w at the projected x2.
+        let a_h = Mat2::new(
+            h[(0, 0)] - x2h.x * h[(2, 0)],
+            h[(0, 1)] - x2h.x * h[(2, 1)],
+            h[(1, 0)] - x2h.y * h[(2, 0)],
+            h[(1, 1)] - x2h.y * h[(2, 1)],
+        ) * inv_w;
+        r2 + self.affine_weight * (self.data.a[i] - a_h).norm_squared()
+    }
+}
+
 /// Squared transfer error of one point and the projected point's homogeneous scale.
 #[inline(always)]
 fn transfer(h: &Mat3, x1: &Vec2, x2: &Vec2) -> (f64, Vec2, f64) {
@@ -51,6 +70,10 @@ impl Problem for HomographyProblem<'_> {
 
     fn len(&self) -> usize {
         self.data.len()
+    }
+
+    fn positions(&self) -> Option<(&[Vec2], &[Vec2])> {
+        Some((&self.data.x1, &self.data.x2))
     }
 
     fn sample_size(&self) -> usize {
@@ -93,25 +116,14 @@ impl Problem for HomographyProblem<'_> {
     }
 
     fn residuals(&self, h: &Mat3, start: usize, out: &mut [f64]) {
-        let end = start + out.len();
-        let (x1, x2) = (&self.data.x1[start..end], &self.data.x2[start..end]);
-        if self.affine_weight == 0.0 {
-            for ((o, p), q) in out.iter_mut().zip(x1).zip(x2) {
-                *o = transfer(h, p, q).0;
-            }
-            return;
-        }
-        let a = &self.data.a[start..end];
         for (k, o) in out.iter_mut().enumerate() {
-            let (r2, x2h, inv_w) = transfer(h, &x1[k], &x2[k]);
-            // A_H(x1) = (H[0:2,0:2] − x2·H[2,0:2]) / w at the projected x2.
-            let a_h = Mat2::new(
-                h[(0, 0)] - x2h.x * h[(2, 0)],
-                h[(0, 1)] - x2h.x * h[(2, 1)],
-                h[(1, 0)] - x2h.y * h[(2, 0)],
-                h[(1, 1)] - x2h.y * h[(2, 1)],
-            ) * inv_w;
-            *o = r2 + self.affine_weight * (a[k] - a_h).norm_squared();
+            *o = self.residual(h, start + k);
+        }
+    }
+
+    fn residuals_at(&self, h: &Mat3, indices: &[usize], out: &mut [f64]) {
+        for (o, &i) in out.iter_mut().zip(indices) {
+            *o = self.residual(h, i);
         }
     }
 
@@ -173,7 +185,11 @@ impl LeastSquares for HomographyProblem<'_> {
         jtj: &mut Mat9,
         jtr: &mut Vec9,
     ) -> f64 {
-        let (mut a, mut g) = (Mat9::zeros(), Vec9::zeros());
+        // With p = p1/w, J_u = [pᵀ, 0, −u pᵀ] and J_v = [0, pᵀ, −v pᵀ], so JᵀWJ has four
+        // distinct 3×3 blocks, all weighted sums of p pᵀ: Σw ppᵀ (rows 0–2 and 3–5), −Σwu ppᵀ,
+        // −Σwv ppᵀ and Σw(u² + v²) ppᵀ; 24 sums per datum instead of 45 products of 9-vectors.
+        let (mut s, mut su, mut sv, mut suv) = ([0.0; 6], [0.0; 6], [0.0; 6], [0.0; 6]);
+        let (mut g0, mut g1, mut g2) = ([0.0; 3], [0.0; 3], [0.0; 3]);
         let mut cost = 0.0;
         for &i in indices {
             let (x1, x2) = (&self.data.x1[i], &self.data.x2[i]);
@@ -184,27 +200,49 @@ impl LeastSquares for HomographyProblem<'_> {
                 continue;
             }
             let p = [x1.x * inv_w, x1.y * inv_w, inv_w];
-            let mut ju = [0.0; 9];
-            let mut jv = [0.0; 9];
+            let pp = [
+                p[0] * p[0],
+                p[0] * p[1],
+                p[0] * p[2],
+                p[1] * p[1],
+                p[1] * p[2],
+                p[2] * p[2],
+            ];
+            let (u, v) = (proj.x, proj.y);
+            let (wu, wv, wuv) = (w * u, w * v, w * (u * u + v * v));
+            for k in 0..6 {
+                s[k] += w * pp[k];
+                su[k] += wu * pp[k];
+                sv[k] += wv * pp[k];
+                suv[k] += wuv * pp[k];
+            }
+            let (ru, rv) = (w * (u - x2.x), w * (v - x2.y));
+            let rr = u * ru + v * rv;
             for k in 0..3 {
-                ju[k] = p[k];
-                jv[3 + k] = p[k];
-                ju[6 + k] = -proj.x * p[k];
-                jv[6 + k] = -proj.y * p[k];
-            }
-            let (ru, rv) = (proj.x - x2.x, proj.y - x2.y);
-            for r in 0..9 {
-                g[r] += w * (ju[r] * ru + jv[r] * rv);
-                for c in 0..=r {
-                    a[(r, c)] += w * (ju[r] * ju[c] + jv[r] * jv[c]);
-                }
+                g0[k] += ru * p[k];
+                g1[k] += rv * p[k];
+                g2[k] -= rr * p[k];
             }
         }
-        for r in 0..9 {
-            for c in 0..r {
-                a[(c, r)] = a[(r, c)];
+        let sym = |m: &[f64; 6], r: usize, c: usize| {
+            const IDX: [[usize; 3]; 3] = [[0, 1, 2], [1, 3, 4], [2, 4, 5]];
+            m[IDX[r][c]]
+        };
+        let mut a = Mat9::zeros();
+        for r in 0..3 {
+            for c in 0..3 {
+                a[(r, c)] = sym(&s, r, c);
+                a[(3 + r, 3 + c)] = sym(&s, r, c);
+                a[(r, 6 + c)] = -sym(&su, r, c);
+                a[(6 + c, r)] = -sym(&su, r, c);
+                a[(3 + r, 6 + c)] = -sym(&sv, r, c);
+                a[(6 + c, 3 + r)] = -sym(&sv, r, c);
+                a[(6 + r, 6 + c)] = sym(&suv, r, c);
             }
         }
+        let g = Vec9::from_column_slice(&[
+            g0[0], g0[1], g0[2], g1[0], g1[1], g1[2], g2[0], g2[1], g2[2],
+        ]);
         let basis = tangent_basis(h);
         for r in 0..8 {
             let ab = a * basis[r];
@@ -230,6 +268,7 @@ impl LeastSquares for HomographyProblem<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use affcorr_geom::Vec3;
     use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
     use rand::SeedableRng;
 
@@ -244,6 +283,52 @@ mod tests {
             for j in 0..8 {
                 let expected = if i == j { 1.0 } else { 0.0 };
                 assert!((b[i].dot(&b[j]) - expected).abs() < 1e-14);
+            }
+        }
+    }
+
+    #[test]
+    fn normal_equations_equal_the_projected_jacobians() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(8);
+        let scene = PlaneScene::random(&mut rng);
+        let noise = NoiseModel {
+            planes: 1,
+            outlier_ratio: 0.3,
+            pixel_noise: 1.0,
+            affine_noise: 0.0,
+        };
+        let (acs, _) = noisy_correspondences(&mut rng, &scene, 40, &noise);
+        let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
+        let data = Correspondences::from_ac_rows(&rows).unwrap();
+        let problem = HomographyProblem::new(&data, SampleKind::Points, 0.0);
+        let h = scene.homography() / scene.homography().norm();
+        let idx: Vec<usize> = (0..40).collect();
+        let loss = Loss::Cauchy { scale_sq: 4.0 };
+        let (mut jtj, mut jtr) = (Mat9::zeros(), Vec9::zeros());
+        problem.normal_equations(&h, &idx, &loss, &mut jtj, &mut jtr);
+        // Explicit: the 2×9 Jacobian of π(H p1) per datum, weighted, projected on the basis.
+        let (mut a, mut g) = (Mat9::zeros(), Vec9::zeros());
+        for &i in &idx {
+            let (r2, proj, inv_w) = transfer(&h, &data.x1[i], &data.x2[i]);
+            let w = loss.weight(r2);
+            let p = Vec3::new(data.x1[i].x, data.x1[i].y, 1.0) * inv_w;
+            let (mut ju, mut jv) = (Vec9::zeros(), Vec9::zeros());
+            for k in 0..3 {
+                ju[k] = p[k];
+                jv[3 + k] = p[k];
+                ju[6 + k] = -proj.x * p[k];
+                jv[6 + k] = -proj.y * p[k];
+            }
+            a += (ju * ju.transpose() + jv * jv.transpose()) * w;
+            g += (ju * (proj.x - data.x2[i].x) + jv * (proj.y - data.x2[i].y)) * w;
+        }
+        let basis = tangent_basis(&h);
+        for r in 0..8 {
+            let expected = basis[r].dot(&g);
+            assert!((jtr[r] - expected).abs() < 1e-9 * g.norm(), "{r}");
+            for c in 0..8 {
+                let expected = basis[r].dot(&(a * basis[c]));
+                assert!((jtj[(r, c)] - expected).abs() < 1e-9 * a.norm(), "{r} {c}");
             }
         }
     }

@@ -8,12 +8,15 @@
 //! - Residual (px²): the Sampson distance of F = K2⁻ᵀ E K1⁻¹ on the pixel coordinates, exact
 //!   for any fx ≠ fy (no mean-focal approximation), plus the weighted affine Sampson distances.
 
-use super::fundamental::epipolar_residuals;
+use super::fundamental::{epipolar_residuals, epipolar_residuals_at};
 use super::{Correspondences, SampleKind, epipolar_lm};
+use crate::engine::LO_SCHEDULE;
 use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Loss, Mat9, Vec9, levenberg_marquardt};
 use affcorr_geom::camera::{Intrinsics, normalize_ac};
-use affcorr_geom::epipolar::{Pose, fundamental_from_essential, pose_from_essential, skew};
+use affcorr_geom::epipolar::{
+    Pose, fundamental_from_essential, pose_from_essential, skew, triangulate_depths,
+};
 use affcorr_geom::{AffineCorrespondence, Mat3, Vec2, Vec3};
 use affcorr_solvers::essential::essential_lsq;
 use affcorr_solvers::relpose::{
@@ -45,16 +48,20 @@ pub struct RelativePoseProblem<'a> {
     k2: Intrinsics,
     kind: SampleKind,
     affine_weight: f64,
+    /// Squared residual below which cheirality is checked.
+    cheirality_cap_sq: f64,
 }
 
 impl<'a> RelativePoseProblem<'a> {
-    /// `pixels` with intrinsics `k1`, `k2`, sampled as `kind`, scored with `affine_weight`.
+    /// `pixels` with intrinsics `k1`, `k2`, sampled as `kind`, scored with `affine_weight`, for
+    /// the inlier `threshold` (px) of the run.
     pub fn new(
         pixels: &'a Correspondences,
         k1: Intrinsics,
         k2: Intrinsics,
         kind: SampleKind,
         affine_weight: f64,
+        threshold: f64,
     ) -> Self {
         let normalized = if pixels.has_affine() {
             let acs: Vec<AffineCorrespondence> = (0..pixels.len())
@@ -79,6 +86,7 @@ impl<'a> RelativePoseProblem<'a> {
             k2,
             kind,
             affine_weight,
+            cheirality_cap_sq: (LO_SCHEDULE[0] * threshold).powi(2),
         }
     }
 
@@ -89,6 +97,21 @@ impl<'a> RelativePoseProblem<'a> {
             pose,
             essential,
             fundamental: fundamental_from_essential(&essential, &self.k1, &self.k2),
+        }
+    }
+
+    /// Sets the squared residual `r2` of datum `i` to +∞ when the point it triangulates to lies
+    /// behind either camera: such a correspondence can satisfy the epipolar constraint but not
+    /// the pose (PoseLib's relative-pose score checks the same). Only data that could count as
+    /// inliers anywhere (below the widest threshold of local optimisation) pay for the check. Parallel rays (points at infinity) pass.
+    #[inline(always)]
+    fn behind_is_outlier(&self, m: &PoseModel, i: usize, r2: &mut f64) {
+        if *r2 < self.cheirality_cap_sq
+            && let Some((l1, l2)) =
+                triangulate_depths(&m.pose, &self.normalized.x1[i], &self.normalized.x2[i])
+            && !(l1 > 0.0 && l2 > 0.0)
+        {
+            *r2 = f64::INFINITY;
         }
     }
 
@@ -103,6 +126,10 @@ impl Problem for RelativePoseProblem<'_> {
 
     fn len(&self) -> usize {
         self.pixels.len()
+    }
+
+    fn positions(&self) -> Option<(&[Vec2], &[Vec2])> {
+        Some((&self.pixels.x1, &self.pixels.x2))
     }
 
     fn sample_size(&self) -> usize {
@@ -150,6 +177,22 @@ impl Problem for RelativePoseProblem<'_> {
 
     fn residuals(&self, m: &PoseModel, start: usize, out: &mut [f64]) {
         epipolar_residuals(self.pixels, &m.fundamental, self.affine_weight, start, out);
+        for (k, o) in out.iter_mut().enumerate() {
+            self.behind_is_outlier(m, start + k, o);
+        }
+    }
+
+    fn residuals_at(&self, m: &PoseModel, indices: &[usize], out: &mut [f64]) {
+        epipolar_residuals_at(
+            self.pixels,
+            &m.fundamental,
+            self.affine_weight,
+            indices,
+            out,
+        );
+        for (o, &i) in out.iter_mut().zip(indices) {
+            self.behind_is_outlier(m, i, o);
+        }
     }
 
     /// Levenberg–Marquardt on the manifold (R, t ∈ S²) of the pixel Sampson error.
@@ -237,5 +280,49 @@ impl LeastSquares for RelativePoseProblem<'_> {
             r: m.pose.r * rot,
             t,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use affcorr_geom::synthetic::PlaneScene;
+    use rand::SeedableRng;
+
+    #[test]
+    fn a_point_behind_a_camera_is_an_outlier_even_on_its_epipolar_line() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
+        let scene = PlaneScene::random(&mut rng);
+        let pixel = |k: &Intrinsics, x: &Vec3| {
+            let p = k.matrix() * x;
+            Vec2::new(p.x / p.z, p.y / p.z)
+        };
+        // X in front of both cameras, and −X: same image in camera 1, and its image in camera 2
+        // lies on the same epipolar line, but it triangulates behind the cameras.
+        let x = Vec3::new(0.1, -0.2, 4.0);
+        let (front, behind) = (
+            scene.pose.r * x + scene.pose.t,
+            -scene.pose.r * x + scene.pose.t,
+        );
+        let data = Correspondences {
+            x1: vec![pixel(&scene.k1, &x); 2],
+            x2: vec![pixel(&scene.k2, &front), pixel(&scene.k2, &behind)],
+            a: Vec::new(),
+        };
+        let problem =
+            RelativePoseProblem::new(&data, scene.k1, scene.k2, SampleKind::Points, 0.0, 1.0);
+        let model = problem.model(scene.pose);
+        let mut r = [0.0; 2];
+        problem.residuals(&model, 0, &mut r);
+        assert!(r[0] < 1e-12, "{r:?}");
+        assert_eq!(r[1], f64::INFINITY);
+        // The epipolar constraint alone accepts it.
+        let mut sampson = [0.0; 2];
+        epipolar_residuals(&data, &model.fundamental, 0.0, 0, &mut sampson);
+        assert!(sampson[1] < 1e-12, "{sampson:?}");
+        // The SPRT's indexed form agrees.
+        let mut at = [0.0; 2];
+        problem.residuals_at(&model, &[1, 0], &mut at);
+        assert_eq!(at, [r[1], r[0]]);
     }
 }
