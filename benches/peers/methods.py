@@ -88,6 +88,7 @@ def affcorr_methods():
         "affcorr-AC": lambda p: run(p, 8),
         "affcorr-AC-msac": lambda p: run(p, 8, scoring="msac"),
         "affcorr-AC-magsac": lambda p: run(p, 8, scoring="magsac"),
+        "affcorr-AC-graph_cut": lambda p: run(p, 8, lo="graph_cut"),
         "affcorr-points": lambda p: run(p, 4),
     }
 
