@@ -195,7 +195,10 @@ def test_magsac_scoring_recovers_ground_truth(h_data, e_data, columns):
 
 def test_magsac_keeps_its_accuracy_at_a_loose_threshold(e_data):
     # 3x the nominal threshold lets near-threshold outliers in: MSAC gives them full weight,
-    # MAGSAC++ marginalises the noise scale.
+    # MAGSAC++ marginalises the noise scale. Since pose residuals reject points behind a camera
+    # (most of the outliers that used to pull MSAC), the two are close on this one scene
+    # (measured 0.036 deg MSAC, 0.042 deg MAGSAC++); over 10 scenes MAGSAC++ stays 37% better
+    # (crates/affcorr-ransac/tests/scoring_sprt.rs).
     scene, _, corrs, _ = e_data
     err = {}
     for scoring in ("msac", "magsac"):
@@ -209,7 +212,7 @@ def test_magsac_keeps_its_accuracy_at_a_loose_threshold(e_data):
             for s in range(5)
         ]
         err[scoring] = float(np.median(errs))
-    assert err["magsac"] <= err["msac"], err
+    assert err["magsac"] < 0.1 and err["magsac"] <= 1.25 * err["msac"], err
 
 
 def test_sprt_keeps_accuracy_and_saves_residuals(h_data, e_data):
