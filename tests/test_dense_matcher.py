@@ -141,3 +141,18 @@ def test_bad_dense_arguments_are_named(model, tmp_path):
     )
     with pytest.raises(RuntimeError, match="dense-warp-v1"):
         affcorr.Pipeline(dense_model=broken)
+
+
+def test_colour_arrays_reach_the_dense_matcher(pipe):
+    from PIL import Image
+
+    a = np.asarray(Image.open(A_PATH).convert("RGB"))
+    b = np.asarray(Image.open(B_PATH).convert("RGBA"))
+    from_files = pipe.match_pair(A_PATH, B_PATH)
+    from_arrays = pipe.match_pair(a, b)
+    # The test model ignores the pixels: the same cells are drawn; the patches' gray (luma of
+    # the same 8-bit samples) gives the same A up to float rounding.
+    np.testing.assert_array_equal(from_arrays.corrs[:, :4], from_files.corrs[:, :4])
+    np.testing.assert_allclose(from_arrays.corrs[:, 4:], from_files.corrs[:, 4:], atol=1e-4)
+    with pytest.raises(ValueError, match="image_a"):
+        pipe.match_pair(np.full((64, 80, 3), np.nan, np.float32), b)

@@ -3,7 +3,8 @@
 //! which finds the bundled models and adds the robust estimation (`affcorr.estimate_*`).
 //!
 //! - Images are file paths (decoded in Rust, timed as `decode`) or numpy arrays (as
-//!   `affcorr.ShapeEstimator` takes them; the conversion is timed as `decode`).
+//!   `affcorr.ShapeEstimator` takes them; the conversion is timed as `decode`). A dense
+//!   matcher gets (H, W, 3 | 4) arrays in colour.
 //! - Errors follow `runner.rs`: bad arguments and images raise `ValueError`, missing files
 //!   `FileNotFoundError`, model problems (contracts, ONNX Runtime) `RuntimeError`.
 //! - Matching runs with the GIL released.
@@ -13,11 +14,13 @@ use std::time::{Duration, Instant};
 
 use crate::arrays::{flatten, to_numpy};
 use crate::runner::{gray_image, py_error};
-use affcorr::runner::{GrayImage, ImageSource, Matcher, Matches, Pipeline, init_ort as init};
-use numpy::PyUntypedArray;
+use affcorr::runner::{
+    GrayImage, ImageSource, Matcher, Matches, Pipeline, RgbImage, init_ort as init,
+};
+use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList, PyTuple};
+use pyo3::types::{PyDict, PyEllipsis, PyList, PySlice, PyTuple};
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PipelineRunner>()?;
@@ -28,6 +31,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
 enum ImageArg {
     Path(PathBuf),
     Image(GrayImage),
+    Rgb(RgbImage),
 }
 
 impl ImageArg {
@@ -35,18 +39,48 @@ impl ImageArg {
         match self {
             Self::Path(p) => ImageSource::Path(p),
             Self::Image(img) => ImageSource::Image(img),
+            Self::Rgb(img) => ImageSource::Rgb(img),
         }
     }
 }
 
-/// A path stays a path (the pipeline decodes it); an array is converted here. Returns the
-/// conversion time.
-fn image_arg(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<(ImageArg, Duration)> {
+/// A path stays a path (the pipeline decodes it); an array is converted here (to colour for a
+/// dense matcher when it has 3 or 4 channels). Returns the conversion time.
+fn image_arg(
+    py: Python<'_>,
+    obj: &Bound<'_, PyAny>,
+    name: &str,
+    colour: bool,
+) -> PyResult<(ImageArg, Duration)> {
     let t = Instant::now();
-    if obj.cast::<PyUntypedArray>().is_err()
-        && let Ok(path) = obj.extract::<PathBuf>()
-    {
-        return Ok((ImageArg::Path(path), Duration::ZERO));
+    let Ok(array) = obj.cast::<PyUntypedArray>() else {
+        if let Ok(path) = obj.extract::<PathBuf>() {
+            return Ok((ImageArg::Path(path), Duration::ZERO));
+        }
+        // Not a path: gray_image names the argument in its error.
+        return gray_image(py, obj, name).map(|img| (ImageArg::Image(img), t.elapsed()));
+    };
+    if colour && let [h, w, 3 | 4] = array.shape()[..] {
+        // Gray conversion validates dtype, values and shape first (and names the argument);
+        // the colour samples then take its scale: uint8 / 255, uint16 / 65535, float as is.
+        gray_image(py, obj, name)?;
+        let kind: String = array.dtype().getattr("kind")?.extract()?;
+        let itemsize: usize = array.dtype().getattr("itemsize")?.extract()?;
+        let scale = match (kind.as_str(), itemsize) {
+            ("u", 1) => 255.0,
+            ("u", 2) => 65535.0,
+            _ => 1.0,
+        };
+        let np = py.import("numpy")?;
+        let rgb = obj.get_item((PyEllipsis::get(py), PySlice::new(py, 0, 3, 1)))?;
+        let kwargs = PyDict::new(py);
+        kwargs.set_item("dtype", "float32")?;
+        let rgb = np.call_method("ascontiguousarray", (rgb,), Some(&kwargs))?;
+        let rgb = rgb.call_method1("__truediv__", (scale,))?;
+        let rgb = rgb.cast::<PyArrayDyn<f32>>()?.readonly();
+        let img =
+            RgbImage::new(w, h, rgb.as_slice()?.to_vec()).map_err(|e| py_error(e, Some(name)))?;
+        return Ok((ImageArg::Rgb(img), t.elapsed()));
     }
     let img = gray_image(py, obj, name)?;
     Ok((ImageArg::Image(img), t.elapsed()))
@@ -161,8 +195,9 @@ impl PipelineRunner {
         image_a: &Bound<'py, PyAny>,
         image_b: &Bound<'py, PyAny>,
     ) -> PyResult<MatchTuple<'py>> {
-        let (a, ta) = image_arg(py, image_a, "image_a")?;
-        let (b, tb) = image_arg(py, image_b, "image_b")?;
+        let colour = self.inner.matcher() == Matcher::Dense;
+        let (a, ta) = image_arg(py, image_a, "image_a", colour)?;
+        let (b, tb) = image_arg(py, image_b, "image_b", colour)?;
         let m = py
             .detach(|| self.inner.match_pair(a.source(), b.source()))
             .map_err(|e| py_error(e, None))?;
@@ -198,8 +233,9 @@ impl PipelineRunner {
                 )));
             };
             let prefix = |e: PyErr| prefix_error(py, i, e);
-            let (a, ta) = image_arg(py, &a, "image_a").map_err(prefix)?;
-            let (b, tb) = image_arg(py, &b, "image_b").map_err(prefix)?;
+            let colour = self.inner.matcher() == Matcher::Dense;
+            let (a, ta) = image_arg(py, &a, "image_a", colour).map_err(prefix)?;
+            let (b, tb) = image_arg(py, &b, "image_b", colour).map_err(prefix)?;
             args.push((a, b, ta + tb));
         }
         let results: Vec<_> = py.detach(|| {

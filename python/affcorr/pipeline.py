@@ -7,7 +7,7 @@
    exceeds it is downscaled (antialiased) to that working resolution.
 2. **matcher**: the XFeat backbone (``models/xfeat_backbone.onnx``; twice per image for XFeat*),
    or a dense matcher (``"dense"``: a ``dense-warp-v1`` model such as a DKM or RoMa export,
-   given as ``dense_model``; it sees the images in colour).
+   given as ``dense_model``; it sees files and (H, W, 3 | 4) arrays in colour).
 3. **detection** and **matching**: sparse keypoints + mutual nearest neighbours (``"xfeat"``),
    semi-dense cells + mutual nearest neighbours + sub-pixel refinement (``"xfeat-star"``,
    ``models/xfeat_refine.onnx``), or sparse keypoints + LighterGlue (``"xfeat-lighterglue"``,

@@ -120,6 +120,16 @@ impl RgbImage {
         }
     }
 
+    /// The BT.601 luma, as [`GrayImage::open`] computes it for colour files.
+    pub fn to_gray(&self) -> Result<GrayImage> {
+        GrayImage::from_raw(
+            self.width,
+            self.height,
+            3,
+            crate::image::PixelData::F32(&self.data),
+        )
+    }
+
     /// Reads and decodes a PNG or JPEG file in colour (gray files give R = G = B; alpha is
     /// ignored), with [`GrayImage::open`]'s errors.
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
@@ -611,6 +621,30 @@ mod tests {
     fn warp_identity(w: &DenseWarp, k: usize) -> [f32; 2] {
         let [u, v] = w.grid_point(k);
         [u as f32, v as f32]
+    }
+
+    #[test]
+    fn rgb_images_resize_to_planar_and_convert_to_luma() {
+        // 2×1: red, white.
+        let img = RgbImage::new(2, 1, vec![1.0, 0.0, 0.0, 1.0, 1.0, 1.0]).unwrap();
+        assert_eq!(img.planar(2, 1), vec![1.0, 1.0, 0.0, 1.0, 0.0, 1.0]);
+        let g = img.to_gray().unwrap();
+        assert!((g.get(0, 0) - 0.299).abs() < 1e-6 && (g.get(1, 0) - 1.0).abs() < 1e-6);
+        // A constant image stays constant when resized.
+        let flat = RgbImage::new(4, 4, [0.2f32, 0.4, 0.6].repeat(16)).unwrap();
+        let p = flat.planar(2, 3);
+        assert_eq!(p.len(), 18);
+        for (c, want) in [0.2f32, 0.4, 0.6].iter().enumerate() {
+            assert!(
+                p[c * 6..(c + 1) * 6]
+                    .iter()
+                    .all(|v| (v - want).abs() < 1e-6)
+            );
+        }
+        assert!(RgbImage::new(2, 2, vec![0.0; 11]).is_err());
+        assert!(RgbImage::new(1, 1, vec![0.0, f32::NAN, 0.0]).is_err());
+        let gray = GrayImage::new(1, 1, vec![0.5]).unwrap();
+        assert_eq!(RgbImage::from_gray(&gray).data(), &[0.5, 0.5, 0.5]);
     }
 
     #[test]

@@ -265,8 +265,17 @@ pub struct Estimated<M> {
 pub enum ImageSource<'a> {
     /// A decoded image.
     Image(&'a GrayImage),
+    /// A decoded colour image: a dense matcher sees its colour, everything else its BT.601
+    /// luma.
+    Rgb(&'a RgbImage),
     /// A file path.
     Path(&'a Path),
+}
+
+impl<'a> From<&'a RgbImage> for ImageSource<'a> {
+    fn from(img: &'a RgbImage) -> Self {
+        Self::Rgb(img)
+    }
 }
 
 impl<'a> From<&'a GrayImage> for ImageSource<'a> {
@@ -297,6 +306,7 @@ impl<'a> ImageSource<'a> {
     fn load(self) -> Result<Cow<'a, GrayImage>> {
         match self {
             Self::Image(img) => Ok(Cow::Borrowed(img)),
+            Self::Rgb(img) => img.to_gray().map(Cow::Owned),
             Self::Path(p) => GrayImage::open(p).map(Cow::Owned),
         }
     }
@@ -306,6 +316,7 @@ impl<'a> ImageSource<'a> {
     fn load_with_colour(self) -> Result<(Cow<'a, GrayImage>, RgbImage)> {
         match self {
             Self::Image(img) => Ok((Cow::Borrowed(img), RgbImage::from_gray(img))),
+            Self::Rgb(img) => Ok((Cow::Owned(img.to_gray()?), img.clone())),
             Self::Path(p) => {
                 let (img, name) = open_dynamic(p)?;
                 let gray = gray_from_dynamic(&img, &name)?;
