@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import io
 import os
+import re
 import shutil
 import struct
 import subprocess
@@ -284,3 +285,21 @@ def test_the_bundled_data_still_decodes():
     """The battery's reference: the real images decode (so the failures above are the files')."""
     img = affcorr.read_gray_image(data_dir() / "graffiti" / "graf1.png")
     assert img.shape == (640, 800) and 0.0 <= img.min() < img.max() <= 1.0
+
+
+def test_the_reliability_table_names_tests_that_exist():
+    """docs/reliability.md's bad-input table is checked against the tests it cites."""
+    root = Path(__file__).resolve().parent.parent
+    doc = (root / "docs" / "reliability.md").read_text()
+    section = doc.split("## Bad-input battery")[1].split("\n## ")[0]
+    rows = [r for r in section.splitlines() if r.startswith("| ") and "---" not in r][1:]
+    files = [*(root / "tests").glob("test_*.py"), *(root / "crates/affcorr/tests").glob("*.rs")]
+    sources = "\n".join(p.read_text() for p in files)
+    cited = 0
+    for row in rows:
+        for name in re.findall(r"`([^`]+)`", row.rsplit("|", 2)[-2]):
+            name = name.split("::")[-1].split("[")[0].rstrip("…").rstrip("_")
+            if re.fullmatch(r"[a-z][a-z0-9_]*", name) and name.count("_") >= 2:
+                assert re.search(rf"fn {name}|def {name}", sources), name
+                cited += 1
+    assert cited >= 25, cited
