@@ -26,6 +26,7 @@ import csv
 import json
 import os
 import platform
+import shlex
 import subprocess
 import sys
 import tempfile
@@ -105,6 +106,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--matchers", nargs="+", default=["xfeat-lighterglue", "xfeat", "xfeat-star"])
     ap.add_argument("--out", type=Path, default=ROOT / "benches/results/pipeline_vs_sift")
+    ap.add_argument("--build", default="", help="a note on the affcorr build, for the table")
     args = ap.parse_args(argv)
 
     import affcorr
@@ -204,8 +206,8 @@ def main(argv: list[str] | None = None) -> int:
     lines = [
         "# Graffiti 1→3: affcorr pipeline vs OpenCV SIFT + USAC_MAGSAC (same run)",
         "",
-        "Command: `OMP_NUM_THREADS=1 .venv/bin/python benches/pipeline_vs_sift.py"
-        + (f" --seeds {args.seeds}" if args.seeds != 10 else "")
+        "Command: `OMP_NUM_THREADS=1 .venv/bin/python benches/pipeline_vs_sift.py "
+        + shlex.join(sys.argv[1:] if argv is None else argv).replace(str(ROOT) + "/", "")
         + "`",
         "",
         f"Machine: {platform.machine()}, {os.cpu_count()} cores, load average "
@@ -213,7 +215,9 @@ def main(argv: list[str] | None = None) -> int:
         f"{args.threads} threads; OpenCV {sift['version']} (numpy {sift['numpy']}) in "
         "benches/peers/.venv-peers; SIFT keypoints "
         f"{sift['keypoints'][0]} / {sift['keypoints'][1]}; SIFT wall time incl. the "
-        f"subprocess {sift_wall:.1f} s.",
+        f"subprocess {sift_wall:.1f} s. affcorr from {Path(affcorr.__file__).parent}"
+        + (f" ({args.build})" if args.build else "")
+        + ".",
         "",
         "H error = mean distance (px) between the 4 corner pixels of graf1 mapped by the "
         "estimate and by H1to3p; correct = matches with transfer error < 3 px under H1to3p. "
