@@ -1,7 +1,7 @@
 """Experiment 2: accuracy of the affine maps A (paper Tables 2 and 4).
 
     .venv/bin/python benches/eval/affine.py [--max-keypoints 1024] [--max-side 512]
-        [--images N] [--per-pair 500]
+        [--images N] [--per-pair 300]
 
 Data: experiment 1's pairs (data.hpatches_pairs, whose matches it reuses from the cache), where
 the ground truth A_gt = dx2/dx1 of H is exact at every point (identity on illumination pairs).
@@ -119,7 +119,7 @@ def main(argv=None) -> None:
     p.add_argument("--max-side", type=int, default=512)
     p.add_argument("--images", type=int, default=None)
     p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--per-pair", type=int, default=500, help="correct matches scored per pair")
+    p.add_argument("--per-pair", type=int, default=300, help="correct matches scored per pair")
     p.add_argument("--out", default=str(common.RESULTS / "affine"))
     args = p.parse_args(argv)
     common.use_openblas()
