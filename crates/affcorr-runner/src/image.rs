@@ -237,7 +237,25 @@ fn decode_dynamic(bytes: &[u8], source_name: &str) -> Result<DynamicImage> {
             "truncated JPEG (no end-of-image marker after the last scan)".to_string(),
         ));
     }
-    reader.decode().map_err(|e| decode_error(e.to_string()))
+    reader.decode().map_err(|e| match e {
+        image::ImageError::Limits(_) => decode_error(too_large(bytes, &e)),
+        e => decode_error(e.to_string()),
+    })
+}
+
+/// Names the size of an image refused by the decoder's allocation limit (`image`'s default
+/// `Limits`, 512 MiB), which it checks from the header before allocating.
+fn too_large(bytes: &[u8], e: &image::ImageError) -> String {
+    let dims = ImageReader::new(Cursor::new(bytes))
+        .with_guessed_format()
+        .ok()
+        .and_then(|r| r.into_dimensions().ok());
+    match dims {
+        Some((w, h)) => {
+            format!("{e}: the image is {w}×{h} pixels, over the decoder's 512 MiB limit")
+        }
+        None => e.to_string(),
+    }
 }
 
 /// A decoded image to gray (BT.601 luma for colour).

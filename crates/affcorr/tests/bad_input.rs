@@ -498,8 +498,20 @@ fn crc32(bytes: &[u8]) -> u32 {
 fn bad_images_are_decode_errors_not_aborts() {
     let cases: [(u32, u32, u8, u8, &str); 5] = [
         // Decoding would need more than the decoder's 512 MiB limit: refused before allocating.
-        (20_000, 20_000, 8, 2, "Memory limit exceeded"),
-        (100_000, 100_000, 16, 6, "Memory limit exceeded"),
+        (
+            20_000,
+            20_000,
+            8,
+            2,
+            "Memory limit exceeded: the image is 20000×20000 pixels",
+        ),
+        (
+            100_000,
+            100_000,
+            16,
+            6,
+            "100000×100000 pixels, over the decoder's 512 MiB limit",
+        ),
         // Within the limit, but the data stops short.
         (20_000, 20_000, 8, 0, "not have enough data"),
         (0, 10, 8, 0, "Invalid image dimensions"),
