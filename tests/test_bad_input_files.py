@@ -220,27 +220,15 @@ CHILD = """
 
 
 def fake_ort(tmp_path: Path, version: str) -> Path:
-    """A shared library with OrtGetApiBase whose GetApi returns NULL and whose version is
-    `version` (an old build, or a broken one)."""
+    """tests/data/fake_ort/fake_ort.c built as a library reporting `version` (an old build, or a
+    broken one: its GetApi returns NULL)."""
     cc = shutil.which("cc") or shutil.which("gcc")
     if cc is None:
         pytest.skip("no C compiler for the fake ONNX Runtime library")
-    src = tmp_path / "fake.c"
-    src.write_text(
-        textwrap.dedent(
-            f"""
-            #include <stddef.h>
-            #include <stdint.h>
-            static const void* get_api(uint32_t v) {{ (void)v; return NULL; }}
-            static const char* version(void) {{ return "{version}"; }}
-            static const struct {{ const void* (*a)(uint32_t); const char* (*b)(void); }}
-                base = {{ get_api, version }};
-            const void* OrtGetApiBase(void) {{ return &base; }}
-            """
-        )
-    )
+    src = Path(__file__).resolve().parent / "data" / "fake_ort" / "fake_ort.c"
     lib = tmp_path / f"libonnxruntime.so.{version}"
-    subprocess.run([cc, "-shared", "-fPIC", "-o", str(lib), str(src)], check=True)
+    define = f'-DFAKE_ORT_VERSION="{version}"'
+    subprocess.run([cc, "-shared", "-fPIC", define, "-o", str(lib), str(src)], check=True)
     return lib
 
 

@@ -10,25 +10,15 @@ use std::process::Command;
 
 use affcorr::runner::{RunnerError, init_ort, ort_library};
 
-/// A shared library exporting `OrtGetApiBase` whose `GetVersionString` returns `version` and
-/// whose `GetApi` returns NULL (no API at any level), as an old or broken build would.
+/// `tests/data/fake_ort/fake_ort.c` built as a library whose `GetVersionString` returns
+/// `version` and whose `GetApi` returns NULL (no API at any level), as an old or broken build.
 fn fake_ort(dir: &Path, version: &str) -> Option<PathBuf> {
-    let src = dir.join(format!("fake-{version}.c"));
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/fake_ort/fake_ort.c");
     let lib = dir.join(format!("libonnxruntime.so.{version}"));
-    std::fs::write(
-        &src,
-        format!(
-            "#include <stddef.h>\n#include <stdint.h>\n\
-             static const void* get_api(uint32_t v) {{ (void)v; return NULL; }}\n\
-             static const char* version(void) {{ return \"{version}\"; }}\n\
-             static const struct {{ const void* (*a)(uint32_t); const char* (*b)(void); }} \
-             base = {{ get_api, version }};\n\
-             const void* OrtGetApiBase(void) {{ return &base; }}\n"
-        ),
-    )
-    .ok()?;
     let ok = Command::new("cc")
-        .args(["-shared", "-fPIC", "-o"])
+        .args(["-shared", "-fPIC"])
+        .arg(format!("-DFAKE_ORT_VERSION=\"{version}\""))
+        .arg("-o")
         .arg(&lib)
         .arg(&src)
         .status()
