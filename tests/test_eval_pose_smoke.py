@@ -107,6 +107,7 @@ def test_estimation_cache_and_report(tmp_path, monkeypatch):
         threshold=pose.THRESHOLD,
         grid=pose.PAIRS["quick"],
         pair_counts={"synthetic": {"affcorr": 1}, "chessboard": {}},
+        matching_seconds={"affcorr": 0.1},
         common_pairs={"synthetic": 1, "chessboard": 0},
         cached=False,
         unavailable={},

@@ -403,7 +403,32 @@ def collect_jobs(names, data, grid, log, cached_only=False) -> list[dict]:
         f"matches: {len(todo)} (matcher, pair) in {time.time() - t0:.0f} s; matching seconds "
         + ", ".join(f"{k} {v:.0f}" for k, v in per_matcher.items())
     )
+    MATCHING_SECONDS.update(per_matcher)
     return jobs
+
+
+MATCHING_SECONDS: dict[str, float] = {}  # per matcher, summed over its pairs (cached or not)
+
+
+def peer_versions() -> list[str]:
+    """The libraries' versions in each estimator venv (benches/peers/worker.py's list)."""
+    out = []
+    for group in ("peers", "gcransac"):
+        py = peer_run.GROUP_PYTHON[group]
+        if not py.exists():
+            continue
+        code = (
+            "import sys; sys.path.insert(0, sys.argv[1]); import worker; print(worker.versions())"
+        )
+        p = subprocess.run(
+            [str(py), "-c", code, str(ROOT / "benches/peers")],
+            capture_output=True,
+            text=True,
+            env=peer_run.worker_env(),
+        )
+        if p.returncode == 0 and p.stdout.strip():
+            out.append(f"{group} venv: {p.stdout.strip()}")
+    return out
 
 
 def load_average() -> str:
@@ -471,10 +496,12 @@ def main(argv=None) -> int:
         load=f"{load_before} before, {load_average()} after",
         machine=f"{platform.machine()}, {os.cpu_count()} cores",
         seconds=time.time() - started,
-        versions=sorted(versions) + [", ".join(f"{k} {v}" for k, v in matchers.versions().items())],
+        versions=peer_versions()
+        + ["matchers (.venv): " + ", ".join(f"{k} {v}" for k, v in matchers.versions().items())],
         threshold=THRESHOLD,
         grid=grid,
         pair_counts=counts,
+        matching_seconds=dict(MATCHING_SECONDS),
         common_pairs=shared_counts,
         cached=args.cached,
         unavailable=unavailable,
@@ -611,6 +638,9 @@ def plot(rows: list[dict], out: Path) -> str | None:
                 ):
                     continue
                 groups[(r["matcher"], r["estimator"])].append(r["pose_err"])
+        if not ds.endswith("common") and groups:  # matchers on a subset: see the common panel
+            most = max(len(v) for v in groups.values())
+            groups = {k: v for k, v in groups.items() if len(v) >= 0.95 * most}
         x = np.linspace(0, 20, 201)
         colours = {n: f"C{i}" for i, n in enumerate(matchers.NAMES)}
         for (m, est), errs in sorted(groups.items()):
@@ -666,6 +696,10 @@ def write(out: Path, rows: list[dict], meta: dict) -> None:
         f"Date: {meta['date']}; {meta['seconds'] / 60:.1f} min; load average {meta['load']}; "
         f"{meta['machine']}  ",
         "Versions: " + "; ".join(meta["versions"]) + "  ",
+        "Matching time (the matchers' own seconds summed over their pairs, single-threaded on "
+        "the loaded machine; cached matches keep the time of the run that made them): "
+        + ", ".join(f"{k} {v / 60:.1f} min" for k, v in meta["matching_seconds"].items())
+        + ".  \n"
         "Pairs with matches, per matcher: "
         + "; ".join(
             f"{ds}: "

@@ -270,11 +270,13 @@ def pose_sentences(rows: list[dict]) -> list[str]:
                 f"at most {int(worst['failures'])} of {pairs} pairs ({_label(worst)})."
             )
         if fewer:
-            lines.append(
-                f"{_names(fewer)} ran on fewer pairs (slow on this machine) and are compared "
-                "on the common pairs" + (" below." if not ds.endswith("common") else ".")
+            where = (
+                "are compared on the common pairs below"
+                if ds in ("synthetic", "chessboard")
+                else "are left out of these comparisons"
             )
-        out.append(f"**On {ds_name}** ({pairs} pairs):")
+            lines.append(f"{_names(fewer)} ran on fewer pairs (slow on this machine) and {where}.")
+        out.append(f"**On {ds_name}** ({pairs} pair{'s' if pairs != 1 else ''}):")
         out.append("")
         out += [f"- {t}" for t in lines]
         out.append("")
