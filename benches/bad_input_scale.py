@@ -4,7 +4,9 @@ Each case runs in a fresh interpreter, so its peak RSS is its own:
 
 - ``nan-last-row``: 10^7 (N, 4) rows with a NaN in the last one: time to the ValueError;
 - ``estimate-1e7``: ``estimate_homography`` on 10^7 exact ACs with 10 % outliers;
-- ``decode-20000``: ``read_gray_image`` of a valid 20000 x 20000 8-bit gray PNG.
+- ``decode-20000``: ``read_gray_image`` of a valid 20000 x 20000 8-bit gray PNG;
+- ``pipeline-HxW``: ``Pipeline("xfeat").match_pair`` of a 12 MP and a 48 MP image at full
+  resolution (no ``max_side``).
 
     .venv/bin/python benches/bad_input_scale.py   # writes benches/results/bad_input_scale.md
 """
@@ -56,6 +58,18 @@ CASES = {
         seconds = time.perf_counter() - t0
         note = f"{img.shape}, {os.path.getsize(path) / 1e6:.1f} MB file"
     """,
+    **{
+        f"pipeline-{h}x{w}": f"""
+        rng = np.random.default_rng(0)
+        img = (rng.random(({h} // 8, {w} // 8)) * 255).astype(np.uint8).repeat(8, 0).repeat(8, 1)
+        pipe = affcorr.Pipeline("xfeat", max_keypoints=2048, threads=2)
+        t0 = time.perf_counter()
+        res = pipe.match_pair(img, img)
+        seconds = time.perf_counter() - t0
+        note = f"xfeat at full resolution (no max_side), {{len(res)}} ACs"
+    """
+        for h, w in ((3000, 4000), (6000, 8000))
+    },
 }
 
 PRELUDE = """
