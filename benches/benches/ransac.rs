@@ -3,7 +3,7 @@
 
 use affcorr::geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
 use affcorr::ransac::{
-    Correspondences, EstimatorOptions, RansacOptions, SampleKind, ScoringKind,
+    Correspondences, EstimatorOptions, LoKind, RansacOptions, SampleKind, ScoringKind,
     estimate_fundamental, estimate_homography, estimate_relative_pose,
 };
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -46,14 +46,18 @@ fn bench(c: &mut Criterion) {
     g.sample_size(20);
     let (_, h_data) = data(1, 1);
     let (scene, e_data) = data(8, 2);
-    // Default options (MSAC, SPRT on), then MAGSAC++ scoring and SPRT off with AC samples.
-    let variants: [Variant; 4] = [
+    // Default options (scoring "auto", SPRT on, IRLS LO), then MAGSAC++ scoring, SPRT off and
+    // graph-cut LO with AC samples.
+    let variants: [Variant; 5] = [
         ("ac", SampleKind::Affine, |_| {}),
         ("points", SampleKind::Points, |_| {}),
         ("ac_magsac", SampleKind::Affine, |o| {
             o.scoring = ScoringKind::Magsac
         }),
         ("ac_nosprt", SampleKind::Affine, |o| o.ransac.sprt = false),
+        ("ac_graph_cut", SampleKind::Affine, |o| {
+            o.ransac.lo = LoKind::GraphCut
+        }),
     ];
     for (name, kind, tweak) in variants {
         let opts = |threshold| {
