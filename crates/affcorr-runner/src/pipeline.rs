@@ -564,6 +564,27 @@ impl PipelineBuilder {
     }
 }
 
+/// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
+/// the pixels, ≈160 MB per megapixel (benches/results/bad_input_scale.md: 12 MP 2.0 GB, 48 MP
+/// 7.9 GB), so 64 MP is ≈10 GB; larger images would end in an out-of-memory abort instead of
+/// an error.
+pub const MAX_WORKING_PIXELS: usize = 64_000_000;
+
+fn check_working_size(img: &GrayImage, what: &'static str) -> Result<()> {
+    let (w, h) = (img.width(), img.height());
+    if w.saturating_mul(h) > MAX_WORKING_PIXELS {
+        return Err(RunnerError::invalid(
+            what,
+            format!(
+                "{w}×{h} pixels is over the matcher's limit of {} MP at the working resolution \
+                 (≈160 MB per megapixel): set max_side (e.g. 4096)",
+                MAX_WORKING_PIXELS / 1_000_000
+            ),
+        ));
+    }
+    Ok(())
+}
+
 fn check_dim(what: &'static str, source: &str, got: usize, want: usize) -> Result<()> {
     if got == want {
         Ok(())
@@ -809,6 +830,10 @@ impl Pipeline {
         };
         let (work_a, sa) = self.limit_side(&img_a);
         let (work_b, sb) = self.limit_side(&img_b);
+        if self.matcher != Matcher::Dense {
+            check_working_size(&work_a, "image_a")?;
+            check_working_size(&work_b, "image_b")?;
+        }
         timings.decode += elapsed(&mut t);
 
         let raw = match (self.matcher, &colour) {

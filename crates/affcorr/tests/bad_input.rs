@@ -669,5 +669,20 @@ fn pipeline_builder_names_what_is_missing_or_invalid() {
             .unwrap();
         let r: Result<_, PipelineError> = p.match_pair("nope.png", "nope.png").map_err(Into::into);
         message(r, &["nope.png"]);
+        // Over 64 MP at the working resolution: an error naming max_side, not an OOM abort.
+        let huge = GrayImage::new(8200, 8200, vec![0.5; 8200 * 8200]).unwrap();
+        let small = GrayImage::new(64, 64, vec![0.5; 64 * 64]).unwrap();
+        let r = p.match_pair(&small, &huge);
+        assert!(
+            matches!(
+                r,
+                Err(RunnerError::InvalidInput {
+                    what: "image_b",
+                    ..
+                })
+            ),
+            "{r:?}"
+        );
+        message(r, &["8200×8200", "max_side"]);
     }
 }
