@@ -142,11 +142,16 @@ def test_16_bit_rgba_and_gray_files_decode_like_their_arrays(tmp_path, mode, dty
         assert not np.array_equal(from_file, np.round(from_file * 255) / 255)
 
 
-def test_a_huge_valid_array_is_refused_by_the_matcher_only_when_too_small():
-    """Arrays are not size-limited (the caller allocated them); a tiny one is refused."""
-    pipe = affcorr.Pipeline("xfeat", max_keypoints=64, threads=1)
+def test_the_matcher_refuses_images_too_small_or_too_large_for_it(pipe):
+    """Under 32 px, or over 64 MP at the working resolution (≈160 MB per MP: an out-of-memory
+    abort otherwise), the matcher says so before running; max_side brings a large one in."""
     with pytest.raises(ValueError, match="too small"):
         pipe.match_pair(np.zeros((20, 20)), np.zeros((20, 20)))
+    huge = np.zeros((8200, 8200), np.uint8)
+    with pytest.raises(ValueError, match=r"image_a: 8200×8200 pixels is over .* set max_side"):
+        pipe.match_pair(huge, np.zeros((64, 64)))
+    small = affcorr.Pipeline("xfeat", max_keypoints=64, max_side=512, threads=1)
+    assert small.match_pair(huge, huge).corrs.shape[1] == 8  # runs (at 512 px)
 
 
 # --- models ----------------------------------------------------------------------------------
