@@ -205,6 +205,11 @@ fn sturm_roots(p: &[f64], roots: &mut [f64]) -> usize {
             continue;
         }
         if n == 1 || depth > 60 {
+            // Rounding can make the sign counts of a badly scaled sequence non-monotonic, so
+            // that the leaves claim more roots than the degree (found by fuzzing): keep d.
+            if count == d.min(roots.len()) {
+                break;
+            }
             roots[count] = refine(monic, a, b);
             count += 1;
             continue;
@@ -382,6 +387,34 @@ mod tests {
         // A double root is found once.
         let n = real_roots(&from_roots(&[1.0, 1.0, 3.0]), &mut out);
         assert!(n >= 1 && out[..n].iter().any(|r| (r - 1.0).abs() < 1e-6));
+    }
+
+    #[test]
+    fn never_more_roots_than_the_degree() {
+        // Found by fuzzing (fuzz/ solvers, through relative_pose_2ac on absurd ACs): rounding
+        // made the Sturm sign counts non-monotonic, the bisection leaves claimed 11 roots of
+        // this degree-10 polynomial, and the 11th was written past `roots` (out of bounds).
+        let c = [
+            0.05278499815808909,
+            3.284409168811942,
+            -16.189001686608805,
+            9.411998261010933,
+            57.5066543087667,
+            -77.6555726653874,
+            -47.39870138176423,
+            107.19433015151657,
+            -7.869398593989665,
+            -30.080363355967165,
+            0.44782765205510344,
+        ];
+        let mut out = [0.0; MAX_DEGREE];
+        let n = real_roots(&c, &mut out);
+        assert!(n <= MAX_DEGREE, "{n} roots");
+        assert!(
+            out[..n]
+                .iter()
+                .all(|r| r.is_finite() && eval(&c, *r).abs() < 1e-6 * 300.0)
+        );
     }
 
     #[test]
