@@ -5,7 +5,10 @@
 # sessions, inference, contract checks, image decoding). Prints each binary's LEAK SUMMARY and
 # ERROR SUMMARY; the figures go to docs/reliability.md. Slow (tens of minutes): not run in CI.
 #
-#   bash benches/reliability/valgrind.sh            (from the repository root)
+#   bash benches/reliability/valgrind.sh [PACKAGE:TEST[:FILTER]...]   (from the repository root)
+#
+# Without arguments: affcorr-ransac:determinism affcorr-runner:shape_model affcorr-runner:images.
+# FILTER is passed to the test binary (a test-name substring).
 #
 # Needs valgrind (apt-get install valgrind; setup.sh in this folder does it) and .venv's
 # ONNX Runtime for the runner tests.
@@ -24,16 +27,17 @@ for line in sys.stdin:
     if m.get("reason") == "compiler-artifact" and m.get("executable") and m["target"]["kind"] == ["test"]:
         print(m["executable"])' | tail -1
 }
-for spec in affcorr-ransac:determinism affcorr-runner:shape_model affcorr-runner:images; do
-    pkg="${spec%%:*}"
-    test="${spec##*:}"
+specs=("$@")
+[ ${#specs[@]} -gt 0 ] || specs=(affcorr-ransac:determinism affcorr-runner:shape_model affcorr-runner:images)
+for spec in "${specs[@]}"; do
+    IFS=: read -r pkg test filter <<<"$spec"
     exe="$(binary "$pkg" "$test")"
-    log="$out/$test.log"
+    log="$out/$test${filter:+-$filter}.log"
     # One test thread: valgrind serialises threads anyway, and the output stays readable.
     (cd "crates/$pkg" && nice -n 10 valgrind --leak-check=full --show-leak-kinds=definite,indirect \
         --errors-for-leak-kinds=definite --error-exitcode=0 --log-file="$PWD/../../$log" \
-        "$exe" --test-threads=1 >/dev/null 2>&1) || true
-    echo "== $pkg $test ($exe)"
+        "$exe" --test-threads=1 ${filter:+"$filter"} >"$PWD/../../$log.out" 2>&1) || true
+    echo "== $pkg $test ${filter:-(all tests)}: $(grep -h "^test result" "$log.out")"
     grep -E "definitely lost|indirectly lost|possibly lost|still reachable|ERROR SUMMARY" "$log" |
         sed 's/^==[0-9]*== *//'
 done
