@@ -67,7 +67,8 @@ def test_smoke_run_writes_csv_markdown_and_plots(tmp_path):
     md = (tmp_path / "summary.md").read_text()
     assert "benches/peers/run.py --smoke" in md and "affcorr-AC" in md
     rows = (tmp_path / "results.csv").read_text().splitlines()
-    assert len(rows) == 1 + 3 * 4  # header + 3 problems x 4 affcorr methods x 1 scene
+    # header + 3 problems x 5 affcorr methods (AC, AC-msac, AC-magsac, AC-graph_cut, points)
+    assert len(rows) == 1 + 3 * 5
     assert "Load average" in md
     for problem in run.PROBLEMS:
         assert (tmp_path / f"{problem}_error_vs_outliers.png").stat().st_size > 1000

@@ -69,12 +69,16 @@ def cells(grid) -> list[tuple[float, int]]:
 
 
 def rot_err(R, Rgt) -> float:
-    return float(np.degrees(np.arccos(np.clip((np.trace(R @ Rgt.T) - 1) / 2, -1, 1))))
+    """Angle of R Rgtᵀ in degrees. ‖R − Rgt‖_F = 2√2 sin(θ/2) is exact near 0, where the
+    arccos of the trace loses half the digits (a 1e-16 rounding reads as 1e-6 degrees)."""
+    d = np.linalg.norm(np.asarray(R) - np.asarray(Rgt)) / (2 * np.sqrt(2))
+    return float(np.degrees(2 * np.arcsin(np.clip(d, 0, 1))))
 
 
 def vec_err(t, tgt) -> float:
-    c = float(t @ tgt / (np.linalg.norm(t) * np.linalg.norm(tgt) + 1e-300))
-    return float(np.degrees(np.arccos(np.clip(c, -1, 1))))
+    """Angle between two vectors in degrees (atan2 of |t × tgt| and t · tgt: exact near 0)."""
+    t, tgt = np.asarray(t, float), np.asarray(tgt, float)
+    return float(np.degrees(np.arctan2(np.linalg.norm(np.cross(t, tgt)), t @ tgt)))
 
 
 def sampson(F, c) -> np.ndarray:
