@@ -12,5 +12,8 @@ fi
 echo "ORT_DYLIB_PATH=$ORT_DYLIB_PATH"
 # The default members: everything but the extension module, which pytest covers.
 cargo test --locked
+# The evaluation suite's peers (OpenCV, pyhesaff, LightGlue; benches/eval/setup.sh), so that its
+# smoke tests run rather than skip; a peer that cannot be installed is listed, not fatal.
+bash benches/eval/setup.sh
 echo "== pytest"
 .venv/bin/python -m pytest -q
