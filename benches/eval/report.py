@@ -21,6 +21,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # matching.py's MMAscore (Eq. 16)
 
+import matchers  # noqa: E402  (benches/eval/matchers.py: display names)
+
 EXPERIMENTS = [
     ("matching", "1. Image matching, HPatches protocol (paper Table 1)", "matching.py"),
     ("affine", "2. Affine accuracy (paper Tables 2 and 4)", "affine.py"),
@@ -77,16 +79,7 @@ EST_NAMES = {
     "affcorr-AC": "affcorr's 2-AC RANSAC",
     "affcorr-AC-min200": "affcorr's 2-AC RANSAC with at least 200 samples",
 }
-MATCHER_NAMES = {
-    "sift": "SIFT",
-    "hesaff": "Hessian-Affine",
-    "asift": "ASIFT",
-    "xfeat": "XFeat (MNN)",
-    "xfeat-lighterglue": "XFeat+LighterGlue",
-    "disk-lightglue": "DISK+LightGlue",
-    "aliked-lightglue": "ALIKED+LightGlue",
-    "affcorr": "affcorr",
-}
+MATCHER_NAMES = matchers.LABELS  # the registry's display names
 DATASET_NAMES = {
     "synthetic": "the synthetic multi-plane scenes (each matcher on all its pairs)",
     "synthetic-common": "the synthetic scenes, on the pairs every matcher ran on",
