@@ -407,6 +407,9 @@ BAD_INPUTS = [
     ("max_iterations 0", dict(max_iterations=0), "max_iterations"),
     ("max_iterations < 0", dict(max_iterations=-5), "max_iterations must be a non-negative"),
     ("min > max", dict(min_iterations=10, max_iterations=5), "min_iterations"),
+    ("reliability 0", dict(sample_reliability=0.0), r"sample_reliability.*\(0, 1\]"),
+    ("reliability > 1", dict(sample_reliability=1.5), r"sample_reliability.*\(0, 1\]"),
+    ("reliability str", dict(sample_reliability="low"), "sample_reliability must be a number"),
     ("lo flag", dict(local_optimization="yes"), "local_optimization must be a bool"),
     ("refinement flag", dict(final_refinement=1), "final_refinement must be a bool"),
 ]

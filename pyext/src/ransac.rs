@@ -82,6 +82,7 @@ estimator_options! {
     "quality" => |o, v| o.quality = if v.is_none() { None } else { Some(vector(v, "quality")?) };
     "scoring" => |o, v| o.scoring = choice(v, "scoring", SCORINGS)?;
     "confidence" => |o, v| o.ransac.confidence = number(v, "confidence")?;
+    "sample_reliability" => |o, v| o.ransac.sample_reliability = number(v, "sample_reliability")?;
     "min_iterations" => |o, v| o.ransac.min_iterations = integer(v, "min_iterations")?;
     "max_iterations" => |o, v| o.ransac.max_iterations = integer(v, "max_iterations")?;
     "local_optimization" => |o, v| o.ransac.local_optimization = flag(v, "local_optimization")?;

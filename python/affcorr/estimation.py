@@ -29,6 +29,13 @@ loop with adaptive termination, local optimisation and a final refinement (DESIG
                                       for H (the more accurate of the two for each in the peer
                                       benchmark)
   ``confidence``         ``0.9999``   confidence of the adaptive stopping rule, in (0, 1)
+  ``sample_reliability`` ``1.0``      rho in ``(0, 1]`` in the stopping rule
+                                      ``log(1 - confidence) / log(1 - rho w^m)``, where w is
+                                      the fraction of data that can seed a good sample: for AC
+                                      samples the inliers whose affine part is accurate too
+                                      (point residual + 50 px^2 x affine residual within the
+                                      threshold), so noisy ACs are searched longer; lower rho
+                                      to search longer still
   ``min_iterations``     ``0``        never fewer iterations
   ``max_iterations``     ``10000``    never more iterations
   ``local_optimization`` ``True``     iterated least squares on the inliers of each new best

@@ -2,8 +2,9 @@
 //!
 //! Per iteration: draw a minimal sample, fit its models, score each against all data (in blocks,
 //! with an exact bail-out), and on a new best model run local optimisation and tighten the
-//! adaptive iteration bound k = log(1 − confidence) / log(1 − wᵐ) (w: inlier ratio, m: sample
-//! size). Finally the best model is refined on its inliers. Buffers are allocated once, before
+//! adaptive iteration bound k = log(1 − confidence) / log(1 − ρ wᵐ) (m: sample size; w: the
+//! fraction of data that can seed a good sample — the inliers, and for AC samples only those
+//! whose affine part is accurate too; ρ: [`RansacOptions::sample_reliability`]). Finally the best model is refined on its inliers. Buffers are allocated once, before
 //! the loop; the same seed and data always give the same result.
 
 use crate::error::{RansacError, Result};
@@ -355,6 +356,13 @@ pub fn check_options(o: &RansacOptions) -> Result<()> {
     if !(o.confidence > 0.0 && o.confidence < 1.0) {
         return bad("confidence", o.confidence, "must be in (0, 1)");
     }
+    if !(o.sample_reliability > 0.0 && o.sample_reliability <= 1.0) {
+        return bad(
+            "sample_reliability",
+            o.sample_reliability,
+            "must be in (0, 1]",
+        );
+    }
     if o.max_iterations == 0 {
         return bad("max_iterations", 0.0, "must be at least 1");
     }
@@ -509,7 +517,18 @@ where
                     );
                 }
                 let pass = sprt.as_ref().map_or(1.0, Sprt::pass_probability);
-                bound = iterations_needed(candidate.inliers, n, m, options.confidence, pass);
+                // An AC sample needs accurate affine parts too: count the data that can seed
+                // a good minimal sample (`Problem::sample_support`), not just the inliers.
+                let seeds = problem
+                    .sample_support(&candidate.model, scoring.inlier_threshold_sq())
+                    .unwrap_or(candidate.inliers);
+                bound = iterations_needed(
+                    seeds,
+                    n,
+                    m,
+                    options.confidence,
+                    pass * options.sample_reliability,
+                );
                 // The best model's inliers bound its wide support from below: a raw hypothesis
                 // must out-support the optimised best, not just earlier raw ones, to earn an LO.
                 best_wide_support = best_wide_support.max(candidate.inliers);

@@ -19,6 +19,11 @@ pub struct RansacOptions {
     pub threshold: f64,
     /// Confidence of the adaptive stopping rule. Default 0.9999.
     pub confidence: f64,
+    /// ρ in (0, 1], the probability that a minimal sample of seeds (see
+    /// [`crate::Problem::sample_support`]) leads to the consensus, in the stopping rule
+    /// k = log(1 − confidence) / log(1 − ρ wᵐ). Default 1 (the textbook rule); lower it to
+    /// search longer when the seeds' noise is large.
+    pub sample_reliability: f64,
     /// Never fewer iterations than this. Default 0.
     pub min_iterations: usize,
     /// Never more iterations than this. Default 10 000.
@@ -50,6 +55,7 @@ impl Default for RansacOptions {
         Self {
             threshold: 1.0,
             confidence: 0.9999,
+            sample_reliability: 1.0,
             min_iterations: 0,
             max_iterations: 10_000,
             seed: 0,

@@ -44,6 +44,16 @@ pub trait Problem: Sync {
         }
     }
 
+    /// How many data could each seed a good minimal sample under `model` (the inlier
+    /// threshold² is `threshold_sq`), when that differs from its inliers: the stopping rule's
+    /// inlier ratio. `None` (the default): the inliers. AC samples override it, since a
+    /// 2-AC model is only as good as the samples' affine parts, which the point residual does
+    /// not see.
+    fn sample_support(&self, model: &Self::Model, threshold_sq: f64) -> Option<usize> {
+        let _ = (model, threshold_sq);
+        None
+    }
+
     /// Pixel positions (x1, x2) of the data, for the neighbourhood graph of graph-cut local
     /// optimisation; `None` (the default) when the data have none, which makes
     /// [`crate::options::LoKind::GraphCut`] an error.

@@ -7,7 +7,7 @@
 //! - Residual (px²): the point Sampson distance SD_P, plus, with `affine_weight` λ > 0,
 //!   λ·(SD_A,1 + SD_A,2), the affine Sampson distances of DESIGN.md §3.
 
-use super::{Correspondences, SampleKind, epipolar_lm};
+use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, epipolar_lm};
 use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Loss, Mat9, Vec9, levenberg_marquardt};
 use affcorr_geom::epipolar::skew;
@@ -97,6 +97,22 @@ fn epipolar_residual(data: &Correspondences, f: &Mat3, affine_weight: f64, i: us
     sampson_point(f, &points) + affine_weight * (a0 + a1)
 }
 
+/// The data that can seed a good AC sample under `f` (`Problem::sample_support`); `None` for
+/// point samples.
+pub(crate) fn epipolar_seeds(
+    data: &Correspondences,
+    f: &Mat3,
+    kind: SampleKind,
+    threshold_sq: f64,
+) -> Option<usize> {
+    let w = SEED_AFFINE_WEIGHT;
+    (kind == SampleKind::Affine).then(|| {
+        count_below(data.len(), threshold_sq, |i| {
+            epipolar_residual(data, f, w, i)
+        })
+    })
+}
+
 /// Squared Sampson residuals (point, plus weighted affine) of `data[start..]` under `f`.
 pub(crate) fn epipolar_residuals(
     data: &Correspondences,
@@ -132,6 +148,10 @@ impl Problem for FundamentalProblem<'_> {
 
     fn positions(&self) -> Option<(&[Vec2], &[Vec2])> {
         Some((&self.data.x1, &self.data.x2))
+    }
+
+    fn sample_support(&self, f: &Mat3, threshold_sq: f64) -> Option<usize> {
+        epipolar_seeds(self.data, f, self.kind, threshold_sq)
     }
 
     fn sample_size(&self) -> usize {

@@ -8,7 +8,7 @@
 //!   λ = ρ²/2 the affine term is the mean squared displacement of a circle of radius ρ px mapped
 //!   by A instead of A_H.
 
-use super::{Correspondences, SampleKind};
+use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below};
 use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Loss, Mat9, Vec9, levenberg_marquardt};
 use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2};
@@ -39,8 +39,14 @@ impl HomographyProblem<'_> {
     /// Squared residual of datum `i` (see the module docs).
     #[inline(always)]
     fn residual(&self, h: &Mat3, i: usize) -> f64 {
+        self.residual_weighted(h, i, self.affine_weight)
+    }
+
+    /// Squared residual of datum `i` with affine weight `affine_weight`.
+    #[inline(always)]
+    fn residual_weighted(&self, h: &Mat3, i: usize, affine_weight: f64) -> f64 {
         let (r2, x2h, inv_w) = transfer(h, &self.data.x1[i], &self.data.x2[i]);
-        if self.affine_weight == 0.0 {
+        if affine_weight == 0.0 {
             return r2;
         }
         // A_H(x1) = (H[0:2,0:2] − x2·H[2,0:2]) / w at the projected x2.
@@ -50,7 +56,7 @@ impl HomographyProblem<'_> {
             h[(1, 0)] - x2h.y * h[(2, 0)],
             h[(1, 1)] - x2h.y * h[(2, 1)],
         ) * inv_w;
-        r2 + self.affine_weight * (self.data.a[i] - a_h).norm_squared()
+        r2 + affine_weight * (self.data.a[i] - a_h).norm_squared()
     }
 }
 
@@ -70,6 +76,15 @@ impl Problem for HomographyProblem<'_> {
 
     fn len(&self) -> usize {
         self.data.len()
+    }
+
+    fn sample_support(&self, h: &Mat3, threshold_sq: f64) -> Option<usize> {
+        let w = SEED_AFFINE_WEIGHT;
+        (self.kind == SampleKind::Affine).then(|| {
+            count_below(self.len(), threshold_sq, |i| {
+                self.residual_weighted(h, i, w)
+            })
+        })
     }
 
     fn positions(&self) -> Option<(&[Vec2], &[Vec2])> {

@@ -12,6 +12,20 @@ use crate::error::{RansacError, Result};
 use affcorr_geom::types::{AcRow, PointRow};
 use affcorr_geom::{AffineCorrespondence, Mat2, Vec2};
 
+/// Weight (px²) of the affine residual in the test of whether an AC can seed a good minimal
+/// sample ([`crate::Problem::sample_support`]): the point residual plus this times the affine
+/// one must be within the inlier threshold². With λ = ρ²/2 the affine term of a homography is
+/// the mean squared displacement of a circle of radius ρ px mapped by A instead of A_H; ρ = 10 px
+/// is about a 32×32 patch's inscribed circle. The affine Sampson error SD_A (DESIGN.md §4) is,
+/// to first order, the squared error of A along the epipolar constraint's two rows, so the same
+/// λ serves F and E.
+pub(crate) const SEED_AFFINE_WEIGHT: f64 = 50.0;
+
+/// Counts the data whose residual `r2(i)` is below `threshold_sq`.
+pub(crate) fn count_below(n: usize, threshold_sq: f64, r2: impl Fn(usize) -> f64) -> usize {
+    (0..n).filter(|&i| r2(i) < threshold_sq).count()
+}
+
 /// What a minimal sample is made of.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum SampleKind {

@@ -8,7 +8,7 @@
 //! - Residual (px²): the Sampson distance of F = K2⁻ᵀ E K1⁻¹ on the pixel coordinates, exact
 //!   for any fx ≠ fy (no mean-focal approximation), plus the weighted affine Sampson distances.
 
-use super::fundamental::{epipolar_residuals, epipolar_residuals_at};
+use super::fundamental::{epipolar_residuals, epipolar_residuals_at, epipolar_seeds};
 use super::{Correspondences, SampleKind, epipolar_lm};
 use crate::engine::LO_SCHEDULE;
 use crate::problem::Problem;
@@ -130,6 +130,10 @@ impl Problem for RelativePoseProblem<'_> {
 
     fn positions(&self) -> Option<(&[Vec2], &[Vec2])> {
         Some((&self.pixels.x1, &self.pixels.x2))
+    }
+
+    fn sample_support(&self, m: &PoseModel, threshold_sq: f64) -> Option<usize> {
+        epipolar_seeds(self.pixels, &m.fundamental, self.kind, threshold_sq)
     }
 
     fn sample_size(&self) -> usize {
