@@ -58,3 +58,28 @@ def test_bad_inputs_exit_2_with_a_message(graf, tmp_path, capsys):
     np.savez(tmp_path / "bad.npz", corrs=np.zeros((3, 8)))
     assert cli.main(["show", str(tmp_path / "bad.npz")]) == 2
     assert "missing arrays" in capsys.readouterr().err
+
+
+def test_match_with_a_dense_model(graf, tmp_path):
+    pytest.importorskip("onnx")
+    from affcorr.data import graffiti
+    from affcorr.export.dense_test_model import dense_homography_model
+
+    a, b, _ = graf
+    truth = graffiti()[2]
+    model = dense_homography_model(tmp_path / "gt.onnx", truth, (800, 640), (800, 640))
+    out = tmp_path / "acs.npz"
+    assert cli.main(["match", a, b, "-o", str(out), "--dense-model", str(model)]) == 0
+    corrs = np.load(out)["corrs"]
+    assert len(corrs) > 100
+    # the test model's warp is the ground truth: every match lies on H (measured 1e-4 px)
+    x = np.c_[corrs[:, :2], np.ones(len(corrs))] @ truth.T
+    assert np.abs(x[:, :2] / x[:, 2:] - corrs[:, 2:4]).max() < 0.5
+
+
+def test_dense_model_with_another_matcher_exits_2(graf, tmp_path, capsys):
+    a, b, _ = graf
+    code = cli.main(
+        ["match", a, b, "-o", str(tmp_path / "x.npz"), "--matcher", "xfeat", "--dense-model", "m"]
+    )
+    assert code == 2 and "dense_model" in capsys.readouterr().err

@@ -23,7 +23,7 @@ import numpy as np
 
 from .metrics import corner_error
 
-MATCHERS = ["xfeat-lighterglue", "xfeat", "xfeat-star"]
+MATCHERS = ["xfeat-lighterglue", "xfeat", "xfeat-star", "dense"]
 
 
 def read_matrix(text: str, what: str) -> np.ndarray:
@@ -70,11 +70,26 @@ def _pipeline(args):
         max_keypoints=args.max_keypoints,
         max_side=args.max_side,
         threads=args.threads,
+        dense_model=args.dense_model,
+        shape_model=args.shape_model,
     )
 
 
 def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--matcher", choices=MATCHERS, default="xfeat-lighterglue")
+    p.add_argument(
+        "--matcher",
+        choices=MATCHERS,
+        default=None,
+        help="default: dense with --dense-model, else xfeat-lighterglue",
+    )
+    p.add_argument(
+        "--dense-model",
+        default=None,
+        help="a dense-warp-v1 ONNX matcher (DKM/RoMa export, docs/matchers.md)",
+    )
+    p.add_argument(
+        "--shape-model", default=None, help="a shape-v1 ONNX network (default: the bundled one)"
+    )
     p.add_argument("--max-keypoints", type=int, default=2048, help="keypoints per image")
     p.add_argument(
         "--max-side",
