@@ -42,7 +42,8 @@ def use_openblas() -> None:
 def _key(pair, name: str, max_keypoints: int) -> Path:
     h = hashlib.sha1(pair.img1.tobytes() + pair.img2.tobytes()).hexdigest()[:10]
     folder = CACHE / "matches" / f"v{MATCHES_VERSION}" / f"{pair.id}-{h}"
-    return folder / f"{name}-k{max_keypoints}.npz"
+    shape = f"-shape{matchers.shape_model_tag()}" if name == "affcorr" else ""
+    return folder / f"{name}-k{max_keypoints}{shape}.npz"
 
 
 def matches(name: str, pair, max_keypoints: int) -> matchers.Matches:

@@ -443,6 +443,17 @@ def _pipeline(max_keypoints: int):
 
 
 @functools.cache
+def shape_model_tag() -> str:
+    """The bundled shape network's identity (a hash of the ONNX file): part of every cache key
+    of ACs with affcorr's A, so a new model never reuses the old model's ACs."""
+    import hashlib
+
+    from affcorr.shape import bundled_shape_model
+
+    return hashlib.sha1(bundled_shape_model().read_bytes()).hexdigest()[:10]
+
+
+@functools.cache
 def shape_estimator():
     """affcorr's bundled shape network (single-threaded unless AFFCORR_EVAL_THREADS)."""
     import affcorr

@@ -165,21 +165,27 @@ def get_matches(name: str, pair: pose_data.PosePair, cached_only: bool = False) 
     seconds_shape (affcorr's shape network, when it ran). None if ``cached_only`` and not
     cached."""
     path = match_path(name, pair)
-    if path.exists():
-        return dict(np.load(path))
-    if cached_only:
+    tag = matchers.shape_model_tag()
+    out = dict(np.load(path)) if path.exists() else None
+    if out is not None and str(out.get("shape_tag", "")) == tag:
+        return out
+    if out is None and cached_only:
         return None
     img1, img2 = pair.load()
-    m = matchers.run(name, img1, img2, max_keypoints=MAX_KEYPOINTS)
-    out = dict(x1=m.x1, x2=m.x2, score=m.score, seconds=np.float64(m.seconds))
-    if m.A is not None:
-        out["A_own"] = m.A
+    if out is None or name == "affcorr":  # affcorr's matches are its ACs: run it again
+        m = matchers.run(name, img1, img2, max_keypoints=MAX_KEYPOINTS)
+        out = dict(x1=m.x1, x2=m.x2, score=m.score, seconds=np.float64(m.seconds))
+        if m.A is not None:
+            out["A_own"] = m.A
+    else:  # another matcher's points, cached by an older shape network: new A only
+        m = matchers.Matches(out["x1"], out["x2"], None, out["score"], float(out["seconds"]))
     if name == "affcorr":
         out["A_affcorr"] = m.A
     else:
         s = matchers.with_affcorr_shapes(m, img1, img2)
         out["A_affcorr"] = s.A
         out["seconds_shape"] = np.float64(s.seconds - m.seconds)
+    out["shape_tag"] = np.str_(tag)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(".tmp.npz")
     np.savez(tmp, **out)
@@ -219,7 +225,14 @@ def estimates_cache() -> Path:
 
 
 def _key(r: dict) -> tuple:
-    return (r["dataset"], r["pair"], r["matcher"], r["estimator"], r["A_source"])
+    return (
+        r["dataset"],
+        r["pair"],
+        r["matcher"],
+        r["estimator"],
+        r["A_source"],
+        r.get("shape_tag", ""),
+    )
 
 
 def estimate(jobs: list[dict], tmp: Path, notes: list[str], versions: set) -> list[dict]:
@@ -248,8 +261,12 @@ def estimate(jobs: list[dict], tmp: Path, notes: list[str], versions: set) -> li
 
 
 def _job_key(j: dict, method: str, uses_ac: bool) -> tuple:
+    """An estimate's cache key; ACs with affcorr's A also carry the shape network's tag."""
     p = j["pair"]
-    return (p.dataset, p.name, j["matcher"], method, j["A_source"] if uses_ac else "-")
+    source = j["A_source"] if uses_ac else "-"
+    uses_shape = uses_ac and (source == "affcorr" or j["matcher"] == "affcorr")
+    tag = matchers.shape_model_tag() if uses_shape else ""
+    return (p.dataset, p.name, j["matcher"], method, source, tag)
 
 
 def _estimate(
@@ -330,6 +347,7 @@ def row(job: dict, method: str, uses_ac: bool, r, seconds: float) -> dict:
         pose_err=max(e_R, e_t),
         est_ms=1e3 * seconds,
         match_s=job["seconds"],
+        shape_tag=_job_key(job, method, uses_ac)[-1],
     )
 
 
@@ -446,7 +464,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", type=Path, default=ROOT / "benches/results/eval")
     ap.add_argument("--match-only", action="store_true", help="compute and cache matches only")
     ap.add_argument(
-        "--cached", action="store_true", help="estimate on the cached matches only (no matching)"
+        "--cached",
+        action="store_true",
+        help="estimate on the cached matches only (no matching; the A of an older shape network "
+        "is recomputed)",
     )
     args = ap.parse_args(argv)
     if argv is None:
