@@ -1,12 +1,12 @@
 //! The `affcorr._native` extension module: thin bindings over the facade crate.
 //!
-//! - [`arrays`]: numpy in/out, dtype and contiguity conversion, shape checks that name the
+//! - `arrays`: numpy in/out, dtype and contiguity conversion, shape checks that name the
 //!   argument, and the mapping of Rust errors to Python exceptions.
-//! - [`geom`]: synthesis, decomposition, homography ACs, normalisation, LAFs, epipolar utilities.
-//! - [`sampson`]: Sampson distances and their gradients.
-//! - [`solvers`]: minimal and non-minimal solvers.
-//! - [`runner`]: the shape network, patch extraction and image decoding (ONNX Runtime).
-//! - [`pipeline`]: the end-to-end pipeline: images → matches (XFeat) → ACs.
+//! - `geom`: synthesis, decomposition, homography ACs, normalisation, LAFs, epipolar utilities.
+//! - `sampson`: Sampson distances and their gradients.
+//! - `solvers`: minimal and non-minimal solvers.
+//! - `runner`: the shape network, patch extraction and image decoding (ONNX Runtime).
+//! - `pipeline`: the end-to-end pipeline: images → matches (XFeat) → ACs.
 //!
 //! Every function validates its inputs here or in Rust and raises `ValueError` naming the bad
 //! argument; no Rust panic can cross this boundary because the core crates return `Result`s.

@@ -1,7 +1,7 @@
 //! Camera intrinsics and normalised coordinates (DESIGN.md §2).
 //!
 //! - A pixel p = (x, y, 1) becomes x̂ = K⁻¹ p.
-//! - An AC's A becomes Â = K2[0:2,0:2]⁻¹ · A · K1[0:2,0:2]: the chain rule through
+//! - An AC's A becomes Â = K2\[0:2,0:2\]⁻¹ · A · K1\[0:2,0:2\]: the chain rule through
 //!   x̂2 = K2⁻¹ p2 and p1 = K1 x̂1, both affine in the first two coordinates because the
 //!   last row of K is (0, 0, 1). GC-RANSAC skips this and is right only when fx = fy.
 
@@ -65,7 +65,7 @@ impl Intrinsics {
         Self::new(Mat3::new(fx, 0.0, cx, 0.0, fy, cy, 0.0, 0.0, 1.0), "K")
     }
 
-    /// The matrix K (normalised so that K[2,2] = 1).
+    /// The matrix K (normalised so that K\[2,2\] = 1).
     pub fn matrix(&self) -> &Mat3 {
         &self.k
     }
@@ -108,7 +108,7 @@ impl Intrinsics {
     }
 }
 
-/// The AC in normalised coordinates: x̂1 = K1⁻¹p1, x̂2 = K2⁻¹p2, Â = K2⁻¹[0:2,0:2]·A·K1[0:2,0:2].
+/// The AC in normalised coordinates: x̂1 = K1⁻¹p1, x̂2 = K2⁻¹p2, Â = K2⁻¹\[0:2,0:2\]·A·K1\[0:2,0:2\].
 ///
 /// ```
 /// use affcorr_geom::{AffineCorrespondence, camera::{Intrinsics, normalize_ac}};

@@ -1,6 +1,6 @@
 //! Essential and fundamental matrices, and relative pose (DESIGN.md §2).
 //!
-//! - Motion: X2 = R X1 + t. Then E = [t]× R and p̂2ᵀ E p̂1 = 0 for normalised points.
+//! - Motion: X2 = R X1 + t. Then E = \[t\]× R and p̂2ᵀ E p̂1 = 0 for normalised points.
 //! - F = K2⁻ᵀ E K1⁻¹, so p2ᵀ F p1 = 0 in pixels.
 //! - E = U diag(1, 1, 0) Vᵀ has four (R, t) factorisations (Hartley & Zisserman, Result 9.19):
 //!   R ∈ {U W Vᵀ, U Wᵀ Vᵀ}, t = ±u₃. Cheirality (points in front of both cameras) picks one.
@@ -19,7 +19,7 @@ pub struct Pose {
 }
 
 impl Pose {
-    /// E = [t]× R.
+    /// E = \[t\]× R.
     pub fn essential(&self) -> Mat3 {
         essential_from_pose(&self.r, &self.t)
     }
@@ -31,7 +31,7 @@ pub fn skew(t: &Vec3) -> Mat3 {
     Mat3::new(0.0, -t.z, t.y, t.z, 0.0, -t.x, -t.y, t.x, 0.0)
 }
 
-/// E = [t]× R.
+/// E = \[t\]× R.
 #[inline]
 pub fn essential_from_pose(r: &Mat3, t: &Vec3) -> Mat3 {
     skew(t) * r

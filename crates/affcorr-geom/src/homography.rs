@@ -1,7 +1,7 @@
 //! The affine correspondence a homography induces (DESIGN.md §2).
 //!
 //! With p2 ~ H p1, x2 = (h₁·p1, h₂·p1) / w and w = h₃·p1, the Jacobian is
-//! A = ∂x2/∂x1 = (H[0:2,0:2] − x2 · H[2,0:2]) / w.
+//! A = ∂x2/∂x1 = (H\[0:2,0:2\] − x2 · H\[2,0:2\]) / w.
 
 use crate::batch;
 use crate::camera::check_len;

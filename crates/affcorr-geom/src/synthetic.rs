@@ -2,7 +2,7 @@
 //!
 //! A plane nᵀX1 = d (n unit, d > 0, in camera-1 coordinates) seen by two cameras related by
 //! X2 = R X1 + t induces X2 = (R + t nᵀ/d) X1, hence the homography
-//! H = K2 (R + t nᵀ / d) K1⁻¹, and the fundamental matrix F = K2⁻ᵀ [t]× R K1⁻¹. Every point on
+//! H = K2 (R + t nᵀ / d) K1⁻¹, and the fundamental matrix F = K2⁻ᵀ \[t\]× R K1⁻¹. Every point on
 //! the plane has an exact AC from H ([`crate::homography::ac_from_homography`]), which satisfies
 //! the affine epipolar constraint of F exactly.
 
@@ -40,7 +40,7 @@ impl PlaneScene {
         self.pose.r + self.pose.t * self.normal.transpose() / self.distance
     }
 
-    /// The essential matrix E = [t]× R.
+    /// The essential matrix E = \[t\]× R.
     pub fn essential(&self) -> Mat3 {
         self.pose.essential()
     }

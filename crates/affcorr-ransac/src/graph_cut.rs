@@ -65,7 +65,7 @@ fn cell(v: f64, lo: f64, span: f64) -> usize {
 }
 
 impl GraphCut {
-    /// The grid neighbourhood graph of the correspondences (x1[i], x2[i]).
+    /// The grid neighbourhood graph of the correspondences (x1\[i\], x2\[i\]).
     pub fn new(x1: &[Vec2], x2: &[Vec2]) -> Self {
         let n = x1.len();
         let coords = |i: usize| [x1[i].x, x1[i].y, x2[i].x, x2[i].y];

@@ -8,8 +8,8 @@
 //! | [`essential_lsq`] | points + ACs, ≥ 8 rows | 1 | least squares, projected to the essential manifold |
 //!
 //! Conventions (DESIGN.md §2): inputs are in normalised coordinates, x̂ = K⁻¹p and
-//! Â = K2[:2,:2]⁻¹ A K1[:2,:2] ([`affcorr_geom::camera::normalize_ac`]); the models satisfy
-//! x̂2ᵀ E x̂1 = 0 with E = [t]× R for X2 = R X1 + t, and have unit Frobenius norm (the sign is
+//! Â = K2\[:2,:2\]⁻¹ A K1\[:2,:2\] ([`affcorr_geom::camera::normalize_ac`]); the models satisfy
+//! x̂2ᵀ E x̂1 = 0 with E = \[t\]× R for X2 = R X1 + t, and have unit Frobenius norm (the sign is
 //! arbitrary). Each solver writes into a caller-owned buffer of at least its `*_MAX_SOLUTIONS`
 //! matrices and returns how many it wrote; a degenerate sample gives 0, never a panic.
 //! The minimal solvers allocate nothing.

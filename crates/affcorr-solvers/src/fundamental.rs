@@ -8,7 +8,7 @@
 //! | [`fundamental_ac_lsq`] | N ≥ 3 ACs | ≤ 1 | the 3AC system over N ACs, least squares |
 //!
 //! All solvers take pixels, apply Hartley's isotropic normalisation internally
-//! ([`crate::normalization`]), and write F with ‖F‖_F = 1 (its sign is arbitrary) into the
+//! (`normalization`), and write F with ‖F‖_F = 1 (its sign is arbitrary) into the
 //! caller's buffer, returning the number of models. A sample of the wrong length, with a
 //! non-finite value, coincident points, an affine map with det A ≤ 0, or a rank-deficient
 //! linear system (e.g. all points or all ACs on one plane, which leaves a 3-parameter family of
@@ -125,7 +125,7 @@ pub fn fundamental_8pt(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
 /// singular value vanishes as well (a 2-dim null space, a non-generic configuration), rank 2 is
 /// what pins F down: as in the 7-point solver the solutions are the real roots of det(F₁ + xF₂) = 0 over the two null
 /// vectors, up to 3 models. A null space of dimension ≥ 3 (all three ACs induced by one plane:
-/// any F = [e₂]×H fits) gives 0.
+/// any F = \[e₂\]×H fits) gives 0.
 ///
 /// Returns 0 for `acs.len() != 3`, non-finite values, det A ≤ 0, coincident points, or a null
 /// space of dimension ≥ 3.

@@ -4,12 +4,12 @@
 //! |---|---|---|---|
 //! | [`homography_4pt`] | 4 points | ≤ 1 | normalised DLT, null space in closed form |
 //! | [`homography_2ac`] | 2 ACs | ≤ 1 | 12 linear equations (2 point + 4 affine per AC), LSQ |
-//! | [`homography_1ac_given_f`] | 1 AC + F | ≤ 1 | H = −[e₂]×F + e₂vᵀ, 6 linear equations in v |
+//! | [`homography_1ac_given_f`] | 1 AC + F | ≤ 1 | H = −\[e₂\]×F + e₂vᵀ, 6 linear equations in v |
 //! | [`homography_lsq`] | N ≥ 4 points | ≤ 1 | normalised DLT, least squares |
 //! | [`homography_ac_lsq`] | N ≥ 2 ACs | ≤ 1 | the 2AC system over N ACs, least squares |
 //!
 //! All solvers take pixels, apply Hartley's isotropic normalisation internally
-//! ([`crate::normalization`]), and write H with ‖H‖_F = 1 (its sign is arbitrary) into the
+//! (`normalization`), and write H with ‖H‖_F = 1 (its sign is arbitrary) into the
 //! caller's buffer, returning the number of models. A sample of the wrong length, with a
 //! non-finite value, collinear or coincident points, an affine map with det A ≤ 0, or a
 //! rank-deficient linear system gives 0 models. `out` shorter than the solver's
@@ -19,7 +19,7 @@
 //! With p = (x, y, 1)ᵀ, hₖ the k-th row of H and w = h₃·p1:
 //! - point (DLT, Hartley & Zisserman, *Multiple View Geometry*, 2nd ed., eq. 4.3):
 //!   h₁·p1 − x2·(h₃·p1) = 0 and h₂·p1 − y2·(h₃·p1) = 0;
-//! - affine (from A = (H[0:2,0:2] − x2·H[2,0:2]) / w, DESIGN.md §2; Barath & Hajder, "A theory
+//! - affine (from A = (H\[0:2,0:2\] − x2·H\[2,0:2\]) / w, DESIGN.md §2; Barath & Hajder, "A theory
 //!   of point-wise homography estimation", PRL 2017, eq. 9): for i, j ∈ {1, 2},
 //!   a_ij·(h₃·p1) − h_ij + x2_i·h_3j = 0.
 //!
@@ -174,7 +174,7 @@ pub fn homography_ac_lsq(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usiz
 /// The non-minimal normalised DLT on N ≥ 4 point correspondences (Hartley & Zisserman,
 /// Alg. 4.2): the 2N×9 system folded into a 9×9 triangular factor by blocked Householder QR,
 /// then the right singular vector of its smallest singular value by inverse iteration
-/// ([`crate::normalization`]). Allocation-free.
+/// (`normalization`). Allocation-free.
 ///
 /// Returns 0 when `x1.len() != x2.len()`, N < 4, a value is not finite, or the null space is not
 /// one-dimensional (e.g. all points collinear).
@@ -201,11 +201,11 @@ pub fn homography_lsq(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
 
 /// The homography of one AC given the fundamental matrix F (p2ᵀ F p1 = 0, pixels).
 ///
-/// Every homography compatible with F is H = −[e₂]×F + e₂vᵀ up to scale, with e₂ the epipole in
+/// Every homography compatible with F is H = −\[e₂\]×F + e₂vᵀ up to scale, with e₂ the epipole in
 /// image 2 (Fᵀe₂ = 0, ‖e₂‖ = 1) and v ∈ ℝ³ (Hartley & Zisserman, Result 13.3, using
-/// −[e₂]×[e₂]×F = F for unit e₂). Substituting it into the 2 point and 4 affine equations of
+/// −\[e₂\]×\[e₂\]×F = F for unit e₂). Substituting it into the 2 point and 4 affine equations of
 /// the module doc, each linear in H, gives 6 linear equations in v,
-/// Σₖ (Σᵢ rᵢₖ e₂ᵢ) vₖ = r · vec([e₂]×F) for each equation row r (r as a 3×3 matrix). With exact
+/// Σₖ (Σᵢ rᵢₖ e₂ᵢ) vₖ = r · vec(\[e₂\]×F) for each equation row r (r as a 3×3 matrix). With exact
 /// data their rank is 3 (one point and two affine equations are implied by the epipolar and
 /// affine epipolar constraints), so v is their least-squares solution. This is the HAF method of
 /// Barath & Hajder, "A theory of point-wise homography estimation", PRL 2017, §4; the whole

@@ -299,7 +299,7 @@ fn hartley(x: &[Vec2]) -> Mat3 {
     Mat3::new(s, 0.0, -s * c.x, 0.0, s, -s * c.y, 0.0, 0.0, 1.0)
 }
 
-/// In the normalised frame (F̃, see [`FundamentalProblem`]): ∂F/∂a_k = U [e_k]× S Vᵀ, ∂F/∂b_k = −U S [e_k]× Vᵀ (U ← U exp([a]×), V ← V exp([b]×)),
+/// In the normalised frame (F̃, see [`FundamentalProblem`]): ∂F/∂a_k = U \[e_k\]× S Vᵀ, ∂F/∂b_k = −U S \[e_k\]× Vᵀ (U ← U exp(\[a\]×), V ← V exp(\[b\]×)),
 /// ∂F/∂σ = U diag(0, 1, 0) Vᵀ; the unit-norm rescaling of F does not change the Sampson error.
 impl LeastSquares for FundamentalProblem<'_> {
     type Model = RankTwo;

@@ -34,7 +34,7 @@ const MAX_POSES: usize = if RELPOSE_5PT_MAX_SOLUTIONS > RELPOSE_2AC_MAX_SOLUTION
 pub struct PoseModel {
     /// X2 = R X1 + t, |t| = 1.
     pub pose: Pose,
-    /// E = [t]× R.
+    /// E = \[t\]× R.
     pub essential: Mat3,
     /// F = K2⁻ᵀ E K1⁻¹ (pixels).
     pub fundamental: Mat3,
@@ -234,8 +234,8 @@ fn tangent_basis(t: &Vec3) -> (Vec3, Vec3) {
     (b1, t.cross(&b1))
 }
 
-/// Pose refinement: R ← R·exp([ω]×), t ← (t + α₁b₁ + α₂b₂)/‖·‖, θ = (ω, α), 5 degrees of
-/// freedom. ∂E/∂ω_k = [t]× R [e_k]×, ∂E/∂α_i = [b_i]× R, and ∂F = K2⁻ᵀ ∂E K1⁻¹.
+/// Pose refinement: R ← R·exp(\[ω\]×), t ← (t + α₁b₁ + α₂b₂)/‖·‖, θ = (ω, α), 5 degrees of
+/// freedom. ∂E/∂ω_k = \[t\]× R \[e_k\]×, ∂E/∂α_i = \[b_i\]× R, and ∂F = K2⁻ᵀ ∂E K1⁻¹.
 impl LeastSquares for RelativePoseProblem<'_> {
     type Model = PoseModel;
 

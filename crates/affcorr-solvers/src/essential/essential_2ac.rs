@@ -49,7 +49,7 @@ use affcorr_geom::{AffineCorrespondence, Mat3};
 pub const ESSENTIAL_2AC_MAX_SOLUTIONS: usize = 10;
 
 /// The essential matrices (unit Frobenius norm, up to sign, best first) consistent with two
-/// affine correspondences in normalised coordinates (x̂ = K⁻¹p, Â = K2[:2,:2]⁻¹ A K1[:2,:2];
+/// affine correspondences in normalised coordinates (x̂ = K⁻¹p, Â = K2\[:2,:2\]⁻¹ A K1\[:2,:2\];
 /// see [`affcorr_geom::camera::normalize_ac`]).
 ///
 /// Writes up to [`ESSENTIAL_2AC_MAX_SOLUTIONS`] models into `out` (which must be at least that
