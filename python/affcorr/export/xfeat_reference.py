@@ -428,13 +428,19 @@ class XFeatOnnx:
             outs.append((s, f, rel, rh, rw))
         return dualscale(outs, top_k)
 
-    def match_xfeat_star(self, img1, img2, top_k: int = TOP_K):
+    def coarse_star(self, img1, img2, top_k: int = TOP_K):
+        """XFeat*'s coarse mutual matches before refinement: (kpts1, kpts2, scale1, pair_feats),
+        the refinement model's input (also the training data of affcorr.train.refine_pc)."""
         k1, s1, d1 = self.dense(img1, top_k)
         k2, _, d2 = self.dense(img2, top_k)
         i, j = match_mnn(d1, d2)
         pair = np.concatenate([d1[i], d2[j]], axis=1).astype(F32)
+        return k1[i], k2[j], s1[i], pair
+
+    def match_xfeat_star(self, img1, img2, top_k: int = TOP_K):
+        k1, k2, s1, pair = self.coarse_star(img1, img2, top_k)
         _, offset, conf = self.session("refine").run(None, {"pair_feats": pair})
-        return refine_matches(k1[i], k2[j], s1[i], offset, conf)
+        return refine_matches(k1, k2, s1, offset, conf)
 
     def lighterglue(self, a: Features, b: Features, min_conf: float = LIGHTERGLUE_MIN_CONF):
         inputs = {

@@ -199,6 +199,16 @@ def _local_shrink(Hinv: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.linalg.svd(J, compute_uv=False)[:, 0]
 
 
+def _fundamental(K1, R1, C1, K2, R2, C2) -> np.ndarray:
+    """F of two cameras X_cam = R (X - C): X2 = R X1 + t with R = R2 R1^T, t = R2 (C1 - C2),
+    F = K2^-T [t]x R K1^-1 (p2^T F p1 = 0), Frobenius-normalised."""
+    R = R2 @ R1.T
+    t = R2 @ (C1 - C2)
+    tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
+    Fm = np.linalg.inv(K2).T @ tx @ R @ np.linalg.inv(K1)
+    return Fm / np.linalg.norm(Fm)
+
+
 def plane_pairs(
     rng: np.random.Generator,
     texture: Texture,
@@ -233,11 +243,7 @@ def plane_pairs(
     G1, G2 = _texture_to_view(K1, R1, C1), _texture_to_view(K2, R2, C2)
     H = G2 @ np.linalg.inv(G1)
     H /= H[2, 2]
-    R = R2 @ R1.T
-    t = R2 @ (C1 - C2)
-    tx = np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]])
-    Fm = np.linalg.inv(K2).T @ tx @ R @ np.linalg.inv(K1)
-    Fm /= np.linalg.norm(Fm)
+    Fm = _fundamental(K1, R1, C1, K2, R2, C2)
 
     # Texture points whose patches lie inside the texture in both views.
     m = 4 * n
@@ -271,6 +277,15 @@ def plane_pairs(
     return PlanePairs(_photometric(rng, pa, 0.5), _photometric(rng, pb, 1.0), corrs, Fm, H)
 
 
+def _view_rotation(K1, R1, C1, K2, R2, C2, x) -> float:
+    """The rotation angle (rad) of the view-1 -> view-2 homography's Jacobian J at view-1
+    point x: atan2(J21 - J12, J11 + J22), the angle of J's closest similarity."""
+    H = _texture_to_view(K2, R2, C2) @ np.linalg.inv(_texture_to_view(K1, R1, C1))
+    p = H @ np.array([x[0], x[1], 1.0])
+    J = (H[:2, :2] - np.outer(p[:2] / p[2], H[2, :2])) / p[2]
+    return math.atan2(J[1, 0] - J[0, 1], J[0, 0] + J[1, 1])
+
+
 def render_plane_views(
     rng: np.random.Generator,
     image: np.ndarray,
@@ -279,11 +294,17 @@ def render_plane_views(
     max_tilt_deg: float = 60.0,
     max_scale_ratio: float = 4.0,
     tilts_deg: tuple[float, float] | None = None,
+    with_fundamental: bool = False,
+    max_rotation_deg: float | None = None,
 ):
     """Two full views (H, W) float32 of ``image`` on a plane, as :func:`plane_pairs` draws them,
     and the ground-truth homography view 1 -> view 2. Outside the texture is black. For
     evaluating detectors and matchers on held-out textures. ``tilts_deg``: the two cameras'
-    tilts from the plane's normal, instead of random ones (0-30 and 0-``max_tilt_deg``)."""
+    tilts from the plane's normal, instead of random ones (0-30 and 0-``max_tilt_deg``).
+    ``with_fundamental``: also return the two cameras' F (p2^T F p1 = 0), as a 4th item.
+    ``max_rotation_deg``: roll camera 2 so that view 2 is rotated w.r.t. view 1 (at view 1's
+    centre) by a uniform angle within +-this (default: any roll, the views' rotation is
+    arbitrary), for matchers that are not rotation invariant; drawn after the rest."""
     tex = Texture(image)
     w, h = size
     K1, K2 = _intrinsics(rng), _intrinsics(rng)
@@ -296,6 +317,13 @@ def render_plane_views(
     R1, C1 = _look_at(rng, target, math.radians(tilt1), K1[1, 1] / s1)
     tilt2 = rng.uniform(0, max_tilt_deg) if tilts_deg is None else tilts_deg[1]
     R2, C2 = _look_at(rng, target, math.radians(tilt2), K2[1, 1] / s2)
+    if max_rotation_deg is not None:
+        want = math.radians(rng.uniform(-max_rotation_deg, max_rotation_deg))
+        # Rolling camera 2 by a about its axis turns view 2 by a about the principal point.
+        for _ in range(3):  # the view's rotation is nearly linear in the roll: converges fast
+            a = want - _view_rotation(K1, R1, C1, K2, R2, C2, (w / 2, h / 2))
+            ca, sa = math.cos(a), math.sin(a)
+            R2 = np.array([[ca, -sa, 0], [sa, ca, 0], [0, 0, 1.0]]) @ R2
     views = []
     for K, R, C in ((K1, R1, C1), (K2, R2, C2)):
         G = _texture_to_view(K, R, C)
@@ -317,4 +345,6 @@ def render_plane_views(
         )[0, 0].numpy()
         views.append((img, G))
     H = views[1][1] @ np.linalg.inv(views[0][1])
+    if with_fundamental:
+        return views[0][0], views[1][0], H / H[2, 2], _fundamental(K1, R1, C1, K2, R2, C2)
     return views[0][0], views[1][0], H / H[2, 2]
