@@ -619,6 +619,9 @@ const LO_MIN_GAIN: f64 = 0.005;
 /// model's basin (5 instead of 3 changed no median error over the profile example's scenes and
 /// cost 15–30% more).
 const LO_LM_ITERATIONS: usize = 3;
+/// Local optimisation refines with Levenberg–Marquardt only at steps whose threshold is at most
+/// this multiple of the true one; the wider first steps take the linear fit alone.
+const LO_LM_MAX_SCALE: f64 = 2.0;
 /// Levenberg–Marquardt steps of the final refinement.
 const FINAL_LM_ITERATIONS: usize = 100;
 /// Most refine-and-recollect rounds of the final refinement.
@@ -681,12 +684,16 @@ fn local_optimization<P: Problem, S: Scoring>(
         }
         thin_out(indices, weights, LO_MAX_FIT);
         let threshold_sq = scoring.inlier_threshold_sq() * scale * scale;
-        let refined = problem.refine(
-            &best.model,
-            indices,
-            &scoring.lo_loss(threshold_sq),
-            LO_LM_ITERATIONS,
-        );
+        let refined = (scale <= LO_LM_MAX_SCALE)
+            .then(|| {
+                problem.refine(
+                    &best.model,
+                    indices,
+                    &scoring.lo_loss(threshold_sq),
+                    LO_LM_ITERATIONS,
+                )
+            })
+            .flatten();
         // The linear fit at every step, beside LM: LM's few steps from a rough 2-AC model can
         // stall in a wrong basin on real data (graffiti 1→3 with learned ACs: H corner error
         // 2–6.6 px on 6 of 8 seeds at 2 px with the linear fit on the first step only, 0.8 px on

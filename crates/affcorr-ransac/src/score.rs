@@ -53,6 +53,7 @@ pub trait Scoring: Sync {
 #[derive(Debug, Clone, Copy)]
 pub struct Msac {
     threshold_sq: f64,
+    inv_threshold_sq: f64,
 }
 
 impl Msac {
@@ -60,6 +61,7 @@ impl Msac {
     pub fn new(threshold: f64) -> Self {
         Self {
             threshold_sq: threshold * threshold,
+            inv_threshold_sq: 1.0 / (threshold * threshold),
         }
     }
 }
@@ -68,7 +70,7 @@ impl Scoring for Msac {
     #[inline]
     fn quality(&self, r2: f64) -> f64 {
         // `max` also maps NaN residuals (degenerate models) to 0.
-        (1.0 - r2 / self.threshold_sq).max(0.0)
+        (1.0 - r2 * self.inv_threshold_sq).max(0.0)
     }
 
     #[inline]

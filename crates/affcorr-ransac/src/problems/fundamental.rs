@@ -121,8 +121,21 @@ pub(crate) fn epipolar_residuals(
     start: usize,
     out: &mut [f64],
 ) {
-    for (k, o) in out.iter_mut().enumerate() {
-        *o = epipolar_residual(data, f, affine_weight, start + k);
+    if affine_weight != 0.0 {
+        for (k, o) in out.iter_mut().enumerate() {
+            *o = epipolar_residual(data, f, affine_weight, start + k);
+        }
+        return;
+    }
+    // The hot loop of scoring: slices instead of indices and no loop-invariant branch inside,
+    // so that the compiler can vectorise it.
+    let end = start + out.len();
+    for ((o, x1), x2) in out
+        .iter_mut()
+        .zip(&data.x1[start..end])
+        .zip(&data.x2[start..end])
+    {
+        *o = sampson_point(f, &PointCorrespondence { x1: *x1, x2: *x2 });
     }
 }
 
