@@ -56,21 +56,21 @@ def errors(pipe, pairs) -> np.ndarray:
     return np.concatenate(out) if out else np.zeros(0)
 
 
-def model_dirs(tmp: Path, weights: Path) -> dict:
+def model_dirs(tmp: Path, weights: Path, label: str) -> dict:
     import torch
     from affcorr.export.xfeat import FILES, export_refine, load_refine_weights, load_upstream
     from affcorr.pipeline import bundled_models_dir
 
     torch.set_grad_enabled(False)
     dirs = {}
-    for label, w in (("original", None), ("fine-tuned (CE + 0.01 L_pc)", weights)):
+    for name, w in (("original", None), (label, weights)):
         d = tmp / ("orig" if w is None else "tuned")
         d.mkdir()
         shutil.copy(bundled_models_dir() / FILES["backbone"], d / FILES["backbone"])
         xf = load_upstream()
         note = load_refine_weights(xf, w) if w is not None else ""
         export_refine(xf, d / FILES["refine"], note)
-        dirs[label] = d
+        dirs[name] = d
     return dirs
 
 
@@ -83,6 +83,7 @@ def main(argv=None) -> None:
     p.add_argument("--seed", type=int, default=1)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--out", type=Path, default=RESULTS / "refine_pc")
+    p.add_argument("--label", default="fine-tuned (CE + 0.01 L_pc)", help="the tuned model's row")
     args = p.parse_args(argv)
     import affcorr
     import torch
@@ -92,7 +93,7 @@ def main(argv=None) -> None:
     rows = []
     t0 = time.time()
     with tempfile.TemporaryDirectory() as tmp:
-        for label, d in model_dirs(Path(tmp), args.weights).items():
+        for label, d in model_dirs(Path(tmp), args.weights, args.label).items():
             pipe = affcorr.Pipeline("xfeat-star", models_dir=d, threads=args.threads)
             for name, pairs in sets.items():
                 e = errors(pipe, pairs)
