@@ -118,3 +118,13 @@ def test_estimation_cache_and_report(tmp_path, monkeypatch):
     text = report.build(results, tmp_path / "evaluation.md")
     assert text.count("Not run yet") == 3  # experiments 1, 2 and 4
     assert "affcorr end to end" in text and "### Where affcorr stands" in text
+
+
+def test_rows_cached_before_a_field_existed_are_written(tmp_path):
+    rows = [dict(pair="a", rot_err=0.123456789), dict(pair="b", rot_err=1.0, shape_tag="x")]
+    pose.write_rows_csv(tmp_path / "p.csv", rows)
+    assert (tmp_path / "p.csv").read_text().splitlines() == [
+        "pair,rot_err,shape_tag",
+        "a,0.12346,",
+        "b,1.0,x",
+    ]

@@ -691,18 +691,23 @@ def plot(rows: list[dict], out: Path) -> str | None:
     return path.name
 
 
-def write(out: Path, rows: list[dict], meta: dict) -> None:
-    out.mkdir(parents=True, exist_ok=True)
-    keys = list(rows[0].keys()) if rows else []
-    with open(out / "pose.csv", "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=keys)
+def write_rows_csv(path: Path, rows: list[dict]) -> None:
+    """One CSV row per estimate, with every key of every row as columns (rows cached before a
+    field existed lack it: empty cell), floats at 5 significant digits (far below the errors'
+    own noise)."""
+    keys = list(dict.fromkeys(k for r in rows for k in r))
+    with open(path, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=keys, restval="")
         w.writeheader()
-        # 5 significant digits: the CSV stays small, far below the errors' own noise
         w.writerows(
             {k: float(f"{v:.5g}") if isinstance(v, float) else v for k, v in r.items()}
             for r in rows
-            if r["dataset"] != "synthetic-common"  # the synthetic rows of the common pairs
         )
+
+
+def write(out: Path, rows: list[dict], meta: dict) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    write_rows_csv(out / "pose.csv", [r for r in rows if r["dataset"] != "synthetic-common"])
     summary = summarize(rows)
     with open(out / "pose_summary.csv", "w", newline="") as f:
         if summary:
