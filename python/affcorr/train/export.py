@@ -72,9 +72,9 @@ def export(net: ShapeNet, out: Path, extra_metadata: dict[str, str] | None = Non
     return out
 
 
-def load_trained(workdir: Path, loss: str, hidden: int = 128) -> ShapeNet:
+def load_trained(workdir: Path, loss: str, width: int = 8, hidden: int = 128) -> ShapeNet:
     """E_os from ``workdir/os.pt`` and E_aff from ``workdir/aff_<loss>.pt`` in one module."""
-    net = ShapeNet(hidden)
+    net = ShapeNet(width, hidden)
     if _load(workdir / "os.pt", {"os": net.os}, None) == 0:
         raise SystemExit(f"{workdir / 'os.pt'} is missing: train the 'os' stage first")
     if loss != "none" and _load(workdir / f"aff_{loss}.pt", {"aff": net.aff}, None) == 0:

@@ -38,7 +38,7 @@ from .shape_net import (
     ResidualShapeNet,
     decode_orientation,
     decode_scale,
-    normalise_patches,
+    similarity_to_frame_a,
     synthesize_torch,
 )
 
@@ -158,7 +158,7 @@ def train_os(args) -> None:
     val = similarity_dataset(wd / "similarity_val.npz", "val", args.seed)
     print(f"E_os: {len(train['angle'])} training pairs, {len(val['angle'])} validation pairs")
     torch.manual_seed(args.seed)
-    net = OrientationScaleNet(args.hidden)
+    net = OrientationScaleNet(args.width, args.hidden)
     opt = torch.optim.AdamW(net.parameters(), lr=args.lr, weight_decay=1e-4)
     ckpt = wd / "os.pt"
     step = _load(ckpt, {"os": net}, opt)
@@ -194,12 +194,12 @@ def train_os(args) -> None:
 
 def _affine_prediction(os_net, aff_net, pa, pb):
     with torch.no_grad():
-        na, nb = normalise_patches(pa), normalise_patches(pb)
-        aa, sa = os_net.logits(na)
-        ab, sb = os_net.logits(nb)
+        aa, sa = os_net(pa)
+        ab, sb = os_net(pb)
         o = decode_orientation(ab) - decode_orientation(aa)
         s = decode_scale(sb) / decode_scale(sa)
-    residual = aff_net(na, nb, torch.cos(o), torch.sin(o), s)
+        pb_in_a = similarity_to_frame_a(pb, torch.cos(o), torch.sin(o), s)
+    residual = aff_net(pa, pb_in_a)
     return synthesize_torch(o.double(), s.double(), residual.double()), o, s
 
 
@@ -247,12 +247,12 @@ def train_aff(args) -> None:
         f"E_aff ({args.loss}): {len(train['corrs'])} training pairs, "
         f"{len(val['corrs'])} validation pairs"
     )
-    os_net = OrientationScaleNet(args.hidden)
+    os_net = OrientationScaleNet(args.width, args.hidden)
     if _load(wd / "os.pt", {"os": os_net}, None) == 0:
         raise SystemExit(f"no trained E_os in {wd}: run the 'os' stage first")
     os_net.eval()
     torch.manual_seed(args.seed)
-    aff_net = ResidualShapeNet(args.hidden)
+    aff_net = ResidualShapeNet(args.width, args.hidden)
     opt = torch.optim.AdamW(aff_net.parameters(), lr=args.lr, weight_decay=1e-4)
     ckpt = wd / f"aff_{args.loss}.pt"
     step = _load(ckpt, {"aff": aff_net}, opt)
@@ -316,6 +316,7 @@ def main(argv=None) -> None:
         default=2.0,
         help="E_os: weight of the scale term against the angle term",
     )
+    p.add_argument("--width", type=int, default=8)
     p.add_argument("--hidden", type=int, default=128)
     p.add_argument("--save-every", type=int, default=500)
     p.add_argument("--threads", type=int, default=2)

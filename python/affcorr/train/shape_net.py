@@ -52,9 +52,8 @@ def scale_bin_centres() -> torch.Tensor:
 def normalise_patches(x: torch.Tensor, eps: float = 1e-3) -> torch.Tensor:
     """Zero mean, unit standard deviation per patch (flat patches stay near zero)."""
     mean = x.mean(dim=(2, 3), keepdim=True)
-    centred = x - mean
-    inv_std = torch.rsqrt((centred * centred).mean(dim=(2, 3), keepdim=True) + eps * eps)
-    return centred * inv_std
+    std = ((x - mean) ** 2).mean(dim=(2, 3), keepdim=True).add(eps * eps).sqrt()
+    return (x - mean) / std
 
 
 def _conv(c_in: int, c_out: int, stride: int) -> nn.Sequential:
@@ -65,28 +64,24 @@ def _conv(c_in: int, c_out: int, stride: int) -> nn.Sequential:
     )
 
 
-# (output channels, stride) per 3x3 convolution; both trunks end at 4x4. Chosen for speed in
-# ONNX Runtime (the runner's goal is >= 20k pairs/s on two CPU cores): E_os starts with a
-# stride-2 layer, since full-resolution layers cost the most, and few wide layers run faster
-# than more narrow ones of fewer multiply-adds. E_aff sees 16x16 inputs.
-OS_LAYERS = ((8, 2), (16, 2), (32, 1), (32, 2))
-AFF_LAYERS = ((16, 1), (16, 2), (32, 2))
-AFF_SIZE = 16
-
-
 class Trunk(nn.Module):
-    """Patches -> a feature vector: 3x3 convolutions (``layers``) down to 4x4, then a linear
-    layer."""
+    """32x32 patches -> a feature vector: strided 3x3 convolutions down to 4x4, then a linear
+    layer. Small on purpose (about 0.5 MFLOP per patch): the runner's goal is >= 20k pairs/s on
+    two CPU cores."""
 
-    def __init__(self, c_in: int, layers, out: int) -> None:
+    def __init__(self, c_in: int, width: int, out: int) -> None:
         super().__init__()
-        convs, c = [], c_in
-        for c_out, stride in layers:
-            convs.append(_conv(c, c_out, stride))
-            c = c_out
-        self.features = nn.Sequential(*convs)
+        w = width
+        self.features = nn.Sequential(
+            _conv(c_in, w, 1),  # 32
+            _conv(w, w, 2),  # 16
+            _conv(w, 2 * w, 1),
+            _conv(2 * w, 2 * w, 2),  # 8
+            _conv(2 * w, 4 * w, 1),
+            _conv(4 * w, 4 * w, 2),  # 4
+        )
         self.head = nn.Sequential(
-            nn.Flatten(), nn.Linear(c * 16, out), nn.BatchNorm1d(out), nn.ReLU(inplace=True)
+            nn.Flatten(), nn.Linear(4 * w * 16, out), nn.BatchNorm1d(out), nn.ReLU(inplace=True)
         )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -96,49 +91,30 @@ class Trunk(nn.Module):
 class OrientationScaleNet(nn.Module):
     """E_os: one patch -> (angle logits, scale logits). Shared by both views."""
 
-    def __init__(self, hidden: int = 128) -> None:
+    def __init__(self, width: int = 8, hidden: int = 128) -> None:
         super().__init__()
-        self.trunk = Trunk(1, OS_LAYERS, hidden)
+        self.trunk = Trunk(1, width, hidden)
         self.angle = nn.Linear(hidden, ANGLE_BINS)
         self.scale = nn.Linear(hidden, SCALE_BINS)
 
-    def logits(self, normalised: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """Logits of patches already passed through :func:`normalise_patches`."""
-        h = self.trunk(normalised)
-        return self.angle(h), self.scale(h)
-
     def forward(self, patch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        return self.logits(normalise_patches(patch))
+        h = self.trunk(normalise_patches(patch))
+        return self.angle(h), self.scale(h)
 
 
 class ResidualShapeNet(nn.Module):
-    """E_aff: (patch A, patch B in A's frame by E_os's similarity) -> A'' = (x0, x1, x2).
+    """E_aff: (patch A, patch B in A's frame) -> A'' = (x0, x1, x2)."""
 
-    Both patches are seen at half resolution (16x16 over the same 32x32 support): A'' is a
-    low-frequency property of the patch pair, and the resampling and convolutions cost a
-    quarter of full resolution's.
-    """
-
-    def __init__(self, hidden: int = 128) -> None:
+    def __init__(self, width: int = 8, hidden: int = 128) -> None:
         super().__init__()
-        self.trunk = Trunk(2, AFF_LAYERS, hidden)
+        self.trunk = Trunk(2, width, hidden)
         self.out = nn.Linear(hidden, 3)
         nn.init.zeros_(self.out.weight)
         nn.init.zeros_(self.out.bias)
 
-    def forward(
-        self,
-        norm_a: torch.Tensor,
-        norm_b: torch.Tensor,
-        cos_o: torch.Tensor,
-        sin_o: torch.Tensor,
-        scale: torch.Tensor,
-    ) -> torch.Tensor:
-        """``norm_a``, ``norm_b``: normalised 32x32 patches; (cos O, sin O, S): the similarity
-        x2 = S R(O) x1 from E_os."""
-        half_a = F.avg_pool2d(norm_a, 2)
-        b_in_a = similarity_to_frame_a(F.avg_pool2d(norm_b, 2), cos_o, sin_o, scale)
-        u = self.out(self.trunk(torch.cat([half_a, b_in_a], dim=1)))
+    def forward(self, patch_a: torch.Tensor, patch_b_in_a: torch.Tensor) -> torch.Tensor:
+        x = torch.cat([normalise_patches(patch_a), normalise_patches(patch_b_in_a)], dim=1)
+        u = self.out(self.trunk(x))
         # 1 + x0 = exp(u0), 1 + x2 = exp(u2): always inside the det-normalisation's domain.
         return torch.stack([torch.exp(u[:, 0]) - 1.0, u[:, 1], torch.exp(u[:, 2]) - 1.0], dim=1)
 
@@ -171,39 +147,38 @@ def similarity_to_frame_a(
     """Resample patch B into patch A's frame under the similarity x2 = S R(O) x1.
 
     Pixel u of the output (offset from the centre) reads patch B at S R(O) u; both patches are
-    square and of the same size, so the normalised grid coordinates transform by the same 2x2
-    matrix. Outside patch B reads zero (the patch mean, for a normalised patch).
+    square, so the normalised grid coordinates transform by the same 2x2 matrix. Outside
+    patch B reads zero, i.e. the patch mean after normalisation.
     """
-    size = patch_b.shape[-1]
     c, s = (cos_o * scale).view(-1, 1, 1), (sin_o * scale).view(-1, 1, 1)
     # Normalised coordinates of the pixel centres (align_corners=False); affine_grid itself
     # does not export to ONNX.
-    u = (torch.arange(size, dtype=patch_b.dtype) + 0.5) * (2.0 / size) - 1.0
+    u = (torch.arange(PATCH_SIZE, dtype=patch_b.dtype) + 0.5) * (2.0 / PATCH_SIZE) - 1.0
     bx, by = u.view(1, 1, -1), u.view(1, -1, 1)
     grid = torch.stack([c * bx - s * by, s * bx + c * by], dim=-1)
-    return F.grid_sample(patch_b, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+    b = normalise_patches(patch_b)
+    return F.grid_sample(b, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
 
 
 class ShapeNet(nn.Module):
     """E_os + E_aff in the ONNX contract of DESIGN.md §6."""
 
-    def __init__(self, hidden: int = 128) -> None:
+    def __init__(self, width: int = 8, hidden: int = 128) -> None:
         super().__init__()
-        self.os = OrientationScaleNet(hidden)
-        self.aff = ResidualShapeNet(hidden)
+        self.os = OrientationScaleNet(width, hidden)
+        self.aff = ResidualShapeNet(width, hidden)
 
     def forward(self, patch_a: torch.Tensor, patch_b: torch.Tensor):
-        norm_a, norm_b = normalise_patches(patch_a), normalise_patches(patch_b)
-        # Two calls rather than one on the concatenated batch: the same convolutions without
-        # the copy.
-        angle_a, scale_a = self.os.logits(norm_a)
-        angle_b, scale_b = self.os.logits(norm_b)
+        n = patch_a.shape[0]
+        angle, scale = self.os(torch.cat([patch_a, patch_b], dim=0))
+        angle_a, angle_b = angle[:n], angle[n:]
+        scale_a, scale_b = scale[:n], scale[n:]
         ca, sa = orientation_vector(angle_a)
         cb, sb = orientation_vector(angle_b)
         # cos and sin of O_B - O_A
         c, s = cb * ca + sb * sa, sb * ca - cb * sa
         scale = decode_scale(scale_b) / decode_scale(scale_a)
-        residual = self.aff(norm_a, norm_b, c, s, scale)
+        residual = self.aff(patch_a, similarity_to_frame_a(patch_b, c, s, scale))
         return angle_a, angle_b, scale_a, scale_b, residual
 
 
