@@ -137,16 +137,12 @@ impl Problem for HomographyProblem<'_> {
             }
             return;
         }
-        // The hot loop of scoring: H's entries in registers, slices instead of indices and no
-        // branch, so that it vectorises (4 data per AVX2 instruction).
+        // The hot loop of scoring: slices instead of indices and no loop-invariant branch
+        // inside, so that the compiler can vectorise it.
         let end = start + out.len();
         let (x1, x2) = (&self.data.x1[start..end], &self.data.x2[start..end]);
-        let e: [f64; 9] = std::array::from_fn(|k| h[(k / 3, k % 3)]);
         for ((o, p), q) in out.iter_mut().zip(x1).zip(x2) {
-            let inv_w = 1.0 / (e[6] * p.x + e[7] * p.y + e[8]);
-            let du = (e[0] * p.x + e[1] * p.y + e[2]) * inv_w - q.x;
-            let dv = (e[3] * p.x + e[4] * p.y + e[5]) * inv_w - q.y;
-            *o = du * du + dv * dv;
+            *o = transfer(h, p, q).0;
         }
     }
 
