@@ -4,8 +4,9 @@
 //! with an exact bail-out), and on a new best model run local optimisation and tighten the
 //! adaptive iteration bound k = log(1 − confidence) / log(1 − ρ wᵐ) (m: sample size; w: the
 //! fraction of data that can seed a good sample — the inliers, and for AC samples only those
-//! whose affine part is accurate too; ρ: [`RansacOptions::sample_reliability`]). Finally the best model is refined on its inliers. Buffers are allocated once, before
-//! the loop; the same seed and data always give the same result.
+//! whose affine part is accurate too; ρ: [`RansacOptions::sample_reliability`]). Finally the
+//! best model is refined on its inliers. Buffers are allocated once, before the loop; the same
+//! seed and data always give the same result.
 
 use crate::error::{RansacError, Result};
 use crate::graph_cut::GraphCut;
