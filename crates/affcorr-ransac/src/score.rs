@@ -83,11 +83,12 @@ impl Scoring for Msac {
         if r2 < self.threshold_sq { 1.0 } else { 0.0 }
     }
 
-    /// MSAC's own cost, the truncated quadratic (PoseLib's choice too).
+    /// MSAC's own cost, the truncated quadratic, restricted to the inliers the final refinement
+    /// fits: plain least squares. (Truncated, LM chased the few residuals crossing the
+    /// threshold for several extra steps of no gain; the refinement's rounds re-collect the
+    /// inliers instead.)
     fn refinement_loss(&self) -> Loss {
-        Loss::Truncated {
-            threshold_sq: self.threshold_sq,
-        }
+        Loss::Squared
     }
 
     /// The Cauchy loss: smooth, so that data just beyond a wide threshold still pull.

@@ -4,6 +4,7 @@
 //! |---|---|---|---|
 //! | [`fundamental_7pt`] | 7 points | ≤ 3 | 2-dim null space + cubic det(F₁ + xF₂) = 0 |
 //! | [`fundamental_8pt`] | N ≥ 8 points | ≤ 1 | normalised 8-point, rank 2 enforced |
+//! | [`fundamental_8pt_normal_equations`] | N ≥ 8 points, weighted | ≤ 1 | the same from the normal equations, 8× cheaper |
 //! | [`fundamental_3ac`] | 3 ACs | ≤ 3 (1 generically) | 9 linear equations + rank 2 |
 //! | [`fundamental_ac_lsq`] | N ≥ 3 ACs | ≤ 1 | the 3AC system over N ACs, least squares |
 //!
@@ -28,7 +29,7 @@
 //! points at distance ρ by ε·ρ); exact data is unaffected, noisy estimates improve about 3×.
 
 use crate::normalization::{
-    AFFINE_ROW_RADIUS_PX, Lsq9, NullSpace, Similarity, Vec9, cofactor, gauss_jordan,
+    AFFINE_ROW_RADIUS_PX, Gram9, Lsq9, NullSpace, Similarity, Vec9, cofactor, gauss_jordan,
     mat3_from_vec9, null_vector, smallest_singular3, unit_frobenius,
 };
 use crate::poly::real_roots;
@@ -103,6 +104,50 @@ pub fn fundamental_8pt(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
         lsq.add_row(epipolar_row(&t1.apply(a), &t2.apply(b)));
     }
     let Some(ns) = lsq.solve(RANK_TOL) else {
+        return 0;
+    };
+    if ns.dim > 1 {
+        return 0;
+    }
+    rank2_solution(&ns.v[0], &t1, &t2, out)
+}
+
+/// [`fundamental_8pt`] on the data `indices` of `x1`, `x2`, optionally weighted (row i scaled
+/// by √wᵢ), from the normal equations MᵀWM (45 products per datum) instead of a QR of the N×9
+/// system: about 8× fewer instructions per datum. The Gram matrix squares the condition number,
+/// harmless in Hartley-normalised coordinates; use it where the fit runs often on many points
+/// (local optimisation). Weights must be finite and ≥ 0.
+///
+/// Returns 0 when `x1.len() != x2.len()`, fewer than 8 indices, an index is out of bounds, a
+/// value is not finite, or the null space is not one-dimensional.
+pub fn fundamental_8pt_normal_equations(
+    x1: &[Vec2],
+    x2: &[Vec2],
+    indices: &[usize],
+    weights: Option<&[f64]>,
+    out: &mut [Mat3],
+) -> usize {
+    assert!(out.len() >= FUNDAMENTAL_8PT_MAX_SOLUTIONS, "out too short");
+    let n = x1.len();
+    if x2.len() != n
+        || indices.len() < 8
+        || indices.iter().any(|&i| i >= n)
+        || weights.is_some_and(|w| w.len() != indices.len() || !w.iter().all(|v| *v >= 0.0))
+    {
+        return 0;
+    }
+    let Some((t1, t2)) = normalisers(
+        indices.iter().map(|&i| x1[i]),
+        indices.iter().map(|&i| x2[i]),
+    ) else {
+        return 0;
+    };
+    let mut gram = Gram9::new();
+    for (k, &i) in indices.iter().enumerate() {
+        let w = weights.map_or(1.0, |w| w[k]);
+        gram.add_weighted_row(&epipolar_row(&t1.apply(&x1[i]), &t2.apply(&x2[i])), w);
+    }
+    let Some(ns) = gram.into_lsq().and_then(|lsq| lsq.solve(RANK_TOL)) else {
         return 0;
     };
     if ns.dim > 1 {

@@ -6,6 +6,7 @@
 //! | [`homography_2ac`] | 2 ACs | ≤ 1 | 12 linear equations (2 point + 4 affine per AC), LSQ |
 //! | [`homography_1ac_given_f`] | 1 AC + F | ≤ 1 | H = −\[e₂\]×F + e₂vᵀ, 6 linear equations in v |
 //! | [`homography_lsq`] | N ≥ 4 points | ≤ 1 | normalised DLT, least squares |
+//! | [`homography_lsq_normal_equations`] | N ≥ 4 points, weighted | ≤ 1 | the same from the normal equations, 5× cheaper |
 //! | [`homography_ac_lsq`] | N ≥ 2 ACs | ≤ 1 | the 2AC system over N ACs, least squares |
 //!
 //! All solvers take pixels, apply Hartley's isotropic normalisation internally
@@ -30,8 +31,8 @@
 //! estimates improve about 3× against unweighted rows.
 
 use crate::normalization::{
-    AFFINE_ROW_RADIUS_PX, Lsq9, Similarity, householder_fold, mat3_from_vec9, smallest_singular3,
-    unit_frobenius,
+    AFFINE_ROW_RADIUS_PX, Gram9, Lsq9, Similarity, householder_fold, mat3_from_vec9,
+    smallest_singular3, unit_frobenius,
 };
 use affcorr_geom::{AffineCorrespondence, Mat3, Vec2, Vec3};
 
@@ -199,6 +200,74 @@ pub fn homography_lsq(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
     solve_lsq(&lsq, &t1, &t2, out)
 }
 
+/// [`homography_lsq`] on the data `indices` of `x1`, `x2`, optionally weighted (row pair i
+/// scaled by √wᵢ), from the normal equations instead of a QR of the 2N×9 system.
+///
+/// With p = (x̂1, ŷ1, 1) and q = x̂2 normalised, the two DLT rows of a pair are [pᵀ, 0, −q_x pᵀ]
+/// and [0, pᵀ, −q_y pᵀ], so MᵀWM has four distinct 3×3 blocks, all weighted sums of ppᵀ:
+/// S = Σw ppᵀ (twice on the diagonal), −Σw q_x ppᵀ, −Σw q_y ppᵀ and Σw ‖q‖² ppᵀ: 24 sums per
+/// pair instead of folding 2 rows of 9 (≈ 5× fewer instructions per pair). The Gram matrix
+/// squares the condition number, harmless in Hartley-normalised coordinates (κ(M) ≲ 10³): use
+/// it where the fit runs often on many points (local optimisation), [`homography_lsq`] where
+/// the last digits matter. Weights must be finite and ≥ 0.
+///
+/// Returns 0 when `x1.len() != x2.len()`, fewer than 4 indices, a value is not finite, an index
+/// is out of bounds, or the null space is not one-dimensional.
+pub fn homography_lsq_normal_equations(
+    x1: &[Vec2],
+    x2: &[Vec2],
+    indices: &[usize],
+    weights: Option<&[f64]>,
+    out: &mut [Mat3],
+) -> usize {
+    assert!(out.len() >= HOMOGRAPHY_LSQ_MAX_SOLUTIONS, "out too short");
+    let n = x1.len();
+    if x2.len() != n
+        || indices.len() < 4
+        || indices.iter().any(|&i| i >= n)
+        || weights.is_some_and(|w| w.len() != indices.len() || !w.iter().all(|v| *v >= 0.0))
+    {
+        return 0;
+    }
+    let (Some(t1), Some(t2)) = (
+        Similarity::from_points(indices.iter().map(|&i| x1[i])),
+        Similarity::from_points(indices.iter().map(|&i| x2[i])),
+    ) else {
+        return 0;
+    };
+    let (mut s, mut su, mut sv, mut suv) = ([0.0; 6], [0.0; 6], [0.0; 6], [0.0; 6]);
+    for (k, &i) in indices.iter().enumerate() {
+        let w = weights.map_or(1.0, |w| w[k]);
+        let (p, q) = (t1.apply(&x1[i]), t2.apply(&x2[i]));
+        let pp = [p.x * p.x, p.x * p.y, p.x, p.y * p.y, p.y, 1.0];
+        let (wu, wv, wuv) = (w * q.x, w * q.y, w * q.norm_squared());
+        for k in 0..6 {
+            s[k] += w * pp[k];
+            su[k] += wu * pp[k];
+            sv[k] += wv * pp[k];
+            suv[k] += wuv * pp[k];
+        }
+    }
+    const IDX: [[usize; 3]; 3] = [[0, 1, 2], [1, 3, 4], [2, 4, 5]];
+    let mut gram = [[0.0; 9]; 9];
+    for r in 0..3 {
+        for c in 0..3 {
+            let k = IDX[r][c];
+            gram[r][c] = s[k];
+            gram[3 + r][3 + c] = s[k];
+            gram[r][6 + c] = -su[k];
+            gram[6 + c][r] = -su[k];
+            gram[3 + r][6 + c] = -sv[k];
+            gram[6 + c][3 + r] = -sv[k];
+            gram[6 + r][6 + c] = suv[k];
+        }
+    }
+    if !gram.iter().flatten().all(|v| v.is_finite()) {
+        return 0;
+    }
+    solve_lsq(&Lsq9::from_gram(&gram), &t1, &t2, out)
+}
+
 /// The homography of one AC given the fundamental matrix F (p2ᵀ F p1 = 0, pixels).
 ///
 /// Every homography compatible with F is H = −\[e₂\]×F + e₂vᵀ up to scale, with e₂ the epipole in
@@ -316,17 +385,22 @@ fn ac_least_squares(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize {
     };
     let scale = t2.s / t1.s;
     let w = AFFINE_ROW_RADIUS_PX * t1.s;
-    let mut lsq = Lsq9::new();
+    // The Gram matrix, not a QR: this is the 2-AC minimal solver, run once per RANSAC sample,
+    // where the Householder fold of its 12 rows cost most of the solve.
+    let mut gram = Gram9::new();
     for ac in acs {
         let (p, q) = (t1.apply(&ac.x1), t2.apply(&ac.x2));
         for r in point_rows(&p, &q) {
-            lsq.add_row(r);
+            gram.add_row(&r);
         }
         for r in affine_rows(&p, &q, &(ac.a * scale)) {
-            lsq.add_row(r.map(|v| v * w));
+            gram.add_row(&r.map(|v| v * w));
         }
     }
-    solve_lsq(&lsq, &t1, &t2, out)
+    match gram.into_lsq() {
+        Some(lsq) => solve_lsq(&lsq, &t1, &t2, out),
+        None => 0,
+    }
 }
 
 /// The least-squares null vector as H, if the null space is one-dimensional.

@@ -85,6 +85,101 @@ fn eight_point_recovers_ground_truth() {
 }
 
 #[test]
+fn normal_equation_eight_point_recovers_ground_truth() {
+    for (seed, n) in [(22, 8), (23, 50)] {
+        let (rate, _) = success_rate(seed, n, |acs, out| {
+            let (x1, x2) = points(acs);
+            let idx: Vec<usize> = (0..n).collect();
+            let k = fundamental_8pt_normal_equations(&x1, &x2, &idx, None, out);
+            assert!(k == 0 || out[0].determinant().abs() < 1e-12, "rank 2");
+            k
+        });
+        println!("fundamental_8pt_normal_equations ({n} points): {rate}");
+    }
+}
+
+#[test]
+fn normal_equation_eight_point_matches_the_qr_fit_and_weights_remove_data() {
+    let mut rng = Pcg64::seed_from_u64(24);
+    let (mut qr, mut ne) = ([Mat3::zeros(); 1], [Mat3::zeros(); 1]);
+    for _ in 0..50 {
+        let scene = PlaneScene::random(&mut rng);
+        let exact = multi_plane_sample(&scene, &mut rng, 200);
+        let (x1, x2) = points(&perturb(&mut rng, &exact, 0.5, 0.02));
+        let idx: Vec<usize> = (0..200).step_by(3).collect();
+        let sub = |x: &[affcorr_geom::Vec2]| idx.iter().map(|&i| x[i]).collect::<Vec<_>>();
+        assert_eq!(fundamental_8pt(&sub(&x1), &sub(&x2), &mut qr), 1);
+        assert_eq!(
+            fundamental_8pt_normal_equations(&x1, &x2, &idx, None, &mut ne),
+            1
+        );
+        assert!(
+            best_error(&ne, &qr[0]) < 1e-8,
+            "{}",
+            best_error(&ne, &qr[0])
+        );
+        // A constant weight changes nothing; zero weights remove gross outliers.
+        assert_eq!(
+            fundamental_8pt_normal_equations(&x1, &x2, &idx, Some(&vec![2.5; idx.len()]), &mut qr),
+            1
+        );
+        assert!(best_error(&ne, &qr[0]) < 1e-8, "constant weight");
+        let mut bad = x2.clone();
+        let mut w = vec![1.0; idx.len()];
+        for k in (0..idx.len()).step_by(4) {
+            bad[idx[k]] =
+                affcorr_geom::Vec2::new(rng.random_range(0.0..640.0), rng.random_range(0.0..480.0));
+            w[k] = 0.0;
+        }
+        assert_eq!(
+            fundamental_8pt_normal_equations(&x1, &bad, &idx, None, &mut qr),
+            1
+        );
+        assert_eq!(
+            fundamental_8pt_normal_equations(&x1, &bad, &idx, Some(&w), &mut ne),
+            1
+        );
+        let (e, e_unweighted) = (sampson_rms(&ne[0], &exact), sampson_rms(&qr[0], &exact));
+        assert!(
+            e < 0.6 && e_unweighted > 2.0 * e,
+            "{e} px vs {e_unweighted} px unweighted"
+        );
+    }
+}
+
+#[test]
+fn normal_equation_eight_point_rejects_bad_input() {
+    let mut rng = Pcg64::seed_from_u64(25);
+    let scene = PlaneScene::random(&mut rng);
+    let (x1, x2) = points(&multi_plane_sample(&scene, &mut rng, 12));
+    let all: Vec<usize> = (0..12).collect();
+    let mut out = [Mat3::zeros(); 1];
+    let f = fundamental_8pt_normal_equations;
+    assert_eq!(f(&x1, &x2, &all, None, &mut out), 1);
+    assert_eq!(f(&x1, &x2, &all[..7], None, &mut out), 0, "fewer than 8");
+    assert_eq!(f(&x1, &x2[..11], &all[..8], None, &mut out), 0, "lengths");
+    assert_eq!(
+        f(&x1, &x2, &[0, 1, 2, 3, 4, 5, 6, 12], None, &mut out),
+        0,
+        "index"
+    );
+    assert_eq!(
+        f(&x1, &x2, &all, Some(&[1.0; 11]), &mut out),
+        0,
+        "weights' length"
+    );
+    let mut w = [1.0; 12];
+    w[3] = -1.0;
+    assert_eq!(f(&x1, &x2, &all, Some(&w), &mut out), 0, "negative weight");
+    let mut nan = x2.clone();
+    nan[4].y = f64::NAN;
+    assert_eq!(f(&x1, &nan, &all, None, &mut out), 0, "NaN point");
+    // One plane: any F = [e₂]×H fits, the null space is not one-dimensional.
+    let (p1, p2) = points(&scene.sample(&mut rng, 12));
+    assert_eq!(f(&p1, &p2, &all, None, &mut out), 0, "one plane");
+}
+
+#[test]
 fn three_ac_recovers_ground_truth_with_one_model() {
     let (rate, models) = success_rate(14, 3, |acs, out| {
         let n = fundamental_3ac(acs, out);

@@ -89,6 +89,98 @@ fn least_squares_recovers_ground_truth_exactly() {
     });
 }
 
+#[test]
+fn normal_equation_least_squares_recovers_ground_truth_exactly() {
+    let rate = success_rate(9, 30, |_, acs, out| {
+        let (x1, x2) = points(acs);
+        let idx: Vec<usize> = (0..x1.len()).collect();
+        homography_lsq_normal_equations(&x1, &x2, &idx, None, out)
+    });
+    println!("homography_lsq_normal_equations (30 points): {rate}");
+}
+
+#[test]
+fn normal_equation_least_squares_matches_the_qr_fit_and_honours_indices_and_weights() {
+    let mut rng = Pcg64::seed_from_u64(10);
+    let (mut qr, mut ne) = ([Mat3::zeros(); 1], [Mat3::zeros(); 1]);
+    for _ in 0..50 {
+        let scene = PlaneScene::random(&mut rng);
+        let exact = scene.sample(&mut rng, 200);
+        let noisy = perturb(&mut rng, &exact, 0.5, 0.02);
+        let (x1, x2) = points(&noisy);
+        // Every third point, given by index, against the QR fit on the same subset.
+        let idx: Vec<usize> = (0..200).step_by(3).collect();
+        let sub = |x: &[Vec2]| idx.iter().map(|&i| x[i]).collect::<Vec<_>>();
+        assert_eq!(homography_lsq(&sub(&x1), &sub(&x2), &mut qr), 1);
+        assert_eq!(
+            homography_lsq_normal_equations(&x1, &x2, &idx, None, &mut ne),
+            1
+        );
+        assert!(
+            best_error(&ne, &qr[0]) < 1e-9,
+            "{}",
+            best_error(&ne, &qr[0])
+        );
+        // Integer weights equal repeated rows; zero weights drop a datum.
+        let w: Vec<f64> = (0..idx.len()).map(|k| (k % 3) as f64).collect();
+        let (mut x1r, mut x2r) = (Vec::new(), Vec::new());
+        for (&i, &wi) in idx.iter().zip(&w) {
+            for _ in 0..wi as usize {
+                x1r.push(x1[i]);
+                x2r.push(x2[i]);
+            }
+        }
+        assert_eq!(homography_lsq(&x1r, &x2r, &mut qr), 1);
+        assert_eq!(
+            homography_lsq_normal_equations(&x1, &x2, &idx, Some(&w), &mut ne),
+            1
+        );
+        // The normalisation differs (it uses the weighted-out data too), so the optima differ
+        // slightly (DLT is not invariant to it); their errors agree.
+        let (e, e_qr) = (
+            transfer_error(&ne[0], &exact),
+            transfer_error(&qr[0], &exact),
+        );
+        assert!(
+            (e - e_qr).abs() < 0.05 * e_qr,
+            "weighted: {e} px, repeated rows {e_qr} px"
+        );
+    }
+}
+
+#[test]
+fn normal_equation_least_squares_rejects_bad_input() {
+    let mut rng = Pcg64::seed_from_u64(11);
+    let scene = PlaneScene::random(&mut rng);
+    let (x1, x2) = points(&scene.sample(&mut rng, 10));
+    let all: Vec<usize> = (0..10).collect();
+    let mut out = [Mat3::zeros(); 1];
+    let f = homography_lsq_normal_equations;
+    assert_eq!(f(&x1, &x2, &all, None, &mut out), 1);
+    assert_eq!(f(&x1, &x2, &all[..3], None, &mut out), 0, "fewer than 4");
+    assert_eq!(f(&x1, &x2[..9], &all[..4], None, &mut out), 0, "lengths");
+    assert_eq!(f(&x1, &x2, &[0, 1, 2, 10], None, &mut out), 0, "index");
+    assert_eq!(
+        f(&x1, &x2, &all, Some(&[1.0; 9]), &mut out),
+        0,
+        "weights' length"
+    );
+    let mut w = [1.0; 10];
+    w[3] = -1.0;
+    assert_eq!(f(&x1, &x2, &all, Some(&w), &mut out), 0, "negative weight");
+    w[3] = f64::NAN;
+    assert_eq!(f(&x1, &x2, &all, Some(&w), &mut out), 0, "NaN weight");
+    let mut nan = x2.clone();
+    nan[4].y = f64::NAN;
+    assert_eq!(f(&x1, &nan, &all, None, &mut out), 0, "NaN point");
+    // Collinear points: the null space is not one-dimensional.
+    let line: Vec<Vec2> = (0..10)
+        .map(|i| Vec2::new(i as f64, 2.0 * i as f64))
+        .collect();
+    let line2: Vec<Vec2> = line.iter().map(|p| p * 1.5).collect();
+    assert_eq!(f(&line, &line2, &all, None, &mut out), 0, "collinear");
+}
+
 /// Mean one-sided transfer error (pixels) of `h` on the exact ACs.
 fn transfer_error(h: &Mat3, acs: &[AffineCorrespondence]) -> f64 {
     acs.iter()

@@ -2,8 +2,8 @@
 //!
 //! - Minimal samples: 7 points ([`fundamental_7pt`], ≤ 3 models) or 3 ACs
 //!   ([`fundamental_3ac`]).
-//! - Non-minimal fit: the normalised 8-point algorithm on the inliers ([`fundamental_8pt`]), or
-//!   AC least squares when fewer than 8.
+//! - Non-minimal fit: the normalised 8-point algorithm on the inliers, from its normal equations
+//!   ([`fundamental_8pt_normal_equations`]), or AC least squares when fewer than 8.
 //! - Residual (px²): the point Sampson distance SD_P, plus, with `affine_weight` λ > 0,
 //!   λ·(SD_A,1 + SD_A,2), the affine Sampson distances of DESIGN.md §3.
 
@@ -16,7 +16,7 @@ use affcorr_geom::sampson::{sampson_affine, sampson_point};
 use affcorr_geom::{AffineCorrespondence, Mat3, PointCorrespondence, Vec2, Vec3};
 use affcorr_solvers::fundamental::{
     FUNDAMENTAL_3AC_MAX_SOLUTIONS, FUNDAMENTAL_7PT_MAX_SOLUTIONS, fundamental_3ac, fundamental_7pt,
-    fundamental_8pt, fundamental_ac_lsq,
+    fundamental_8pt_normal_equations, fundamental_ac_lsq,
 };
 use affcorr_solvers::homography::homography_2ac;
 
@@ -197,9 +197,8 @@ impl Problem for FundamentalProblem<'_> {
     fn fit_nonminimal(&self, indices: &[usize], _weights: Option<&[f64]>) -> Option<Mat3> {
         let mut f = [Mat3::zeros(); 1];
         let n = if indices.len() >= 8 {
-            let x1: Vec<Vec2> = indices.iter().map(|&i| self.data.x1[i]).collect();
-            let x2: Vec<Vec2> = indices.iter().map(|&i| self.data.x2[i]).collect();
-            fundamental_8pt(&x1, &x2, &mut f)
+            // The normal equations: LO refits hundreds of points many times per run.
+            fundamental_8pt_normal_equations(&self.data.x1, &self.data.x2, indices, None, &mut f)
         } else if self.data.has_affine() && indices.len() >= 3 {
             let acs: Vec<AffineCorrespondence> = indices.iter().map(|&i| self.data.ac(i)).collect();
             fundamental_ac_lsq(&acs, &mut f)
