@@ -99,6 +99,29 @@ def test_similarity_pairs_labels(texture):
     assert float((za * zw).mean((1, 2)).median()) < 0.5
 
 
+def _back_rotated_correlation(sp):
+    ok = (sp.patch_a.std((1, 2)) > 0.02) & (sp.scale < 1.5)
+    pb = torch.from_numpy(sp.patch_b[ok])[:, None]
+    ang, s = torch.from_numpy(sp.angle[ok]).float(), torch.from_numpy(sp.scale[ok]).float()
+    back = similarity_to_frame_a(pb, torch.cos(ang), torch.sin(ang), s)[:, 0, 10:22, 10:22]
+    a = torch.from_numpy(sp.patch_a[ok])[:, 10:22, 10:22]
+    za = (a - a.mean((1, 2), keepdim=True)) / a.std((1, 2), keepdim=True)
+    zb = (back - back.mean((1, 2), keepdim=True)) / back.std((1, 2), keepdim=True)
+    return float((za * zb).mean((1, 2)).median())
+
+
+def test_similarity_pairs_centre_jitter_moves_patch_b_only(texture):
+    exact = views.similarity_pairs(np.random.default_rng(3), texture, 64, shear=0.0)
+    moved = views.similarity_pairs(
+        np.random.default_rng(3), texture, 64, shear=0.0, centre_jitter=3.0
+    )
+    # Same labels (drawn before the jitter), content of B off-centre by ~3 px.
+    np.testing.assert_array_equal(exact.angle, moved.angle)
+    np.testing.assert_array_equal(exact.scale, moved.scale)
+    assert _back_rotated_correlation(exact) > 0.8
+    assert _back_rotated_correlation(moved) < _back_rotated_correlation(exact) - 0.1
+
+
 def test_shift_distribution():
     p = torch.zeros(2, 10, dtype=torch.float64)
     p[:, 2] = 1.0

@@ -37,14 +37,18 @@ def _textured(pa: np.ndarray, pb: np.ndarray) -> np.ndarray:
     return (pa.std(axis=(1, 2)) > MIN_PATCH_STD) & (pb.std(axis=(1, 2)) > MIN_PATCH_STD)
 
 
-def similarity_dataset(path: Path, split: str, seed: int = 0) -> dict[str, np.ndarray]:
+def similarity_dataset(
+    path: Path, split: str, seed: int = 0, *, centre_jitter: float = 0.0
+) -> dict[str, np.ndarray]:
     """E_os pairs: ``patch_a``, ``patch_b`` (N, 32, 32) uint8, ``angle``, ``scale`` (N,)."""
     if path.exists():
         return dict(np.load(path))
     rng = np.random.default_rng([seed, 0 if split == "train" else 1])
     parts = []
     for _, img in _progress(textures(split), f"similarity pairs ({split})"):
-        sp = similarity_pairs(rng, Texture(img), SIMILARITY_PER_TEXTURE[split])
+        sp = similarity_pairs(
+            rng, Texture(img), SIMILARITY_PER_TEXTURE[split], centre_jitter=centre_jitter
+        )
         k = _textured(sp.patch_a, sp.patch_b)
         parts.append((_u8(sp.patch_a[k]), _u8(sp.patch_b[k]), sp.angle[k], sp.scale[k]))
     out = {

@@ -154,8 +154,9 @@ def _lr(step: int, steps: int, base: float) -> float:
 
 def train_os(args) -> None:
     wd = Path(args.workdir)
-    train = similarity_dataset(wd / "similarity_train.npz", "train", args.seed)
-    val = similarity_dataset(wd / "similarity_val.npz", "val", args.seed)
+    jit = 0.0 if args.centre_jitter is None else args.centre_jitter
+    train = similarity_dataset(wd / "similarity_train.npz", "train", args.seed, centre_jitter=jit)
+    val = similarity_dataset(wd / "similarity_val.npz", "val", args.seed, centre_jitter=jit)
     print(f"E_os: {len(train['angle'])} training pairs, {len(val['angle'])} validation pairs")
     torch.manual_seed(args.seed)
     net = OrientationScaleNet(args.width, args.hidden)
@@ -241,8 +242,9 @@ def train_aff(args) -> None:
     from ..losses import affine_sampson
 
     wd = Path(args.workdir)
-    train = plane_dataset(wd / "plane_train.npz", "train", args.seed)
-    val = plane_dataset(wd / "plane_val.npz", "val", args.seed)
+    jit = 0.5 if args.centre_jitter is None else args.centre_jitter
+    train = plane_dataset(wd / "plane_train.npz", "train", args.seed, centre_jitter=jit)
+    val = plane_dataset(wd / "plane_val.npz", "val", args.seed, centre_jitter=jit)
     print(
         f"E_aff ({args.loss}): {len(train['corrs'])} training pairs, "
         f"{len(val['corrs'])} validation pairs"
@@ -315,6 +317,14 @@ def main(argv=None) -> None:
         type=float,
         default=2.0,
         help="E_os: weight of the scale term against the angle term",
+    )
+    p.add_argument(
+        "--centre-jitter",
+        type=float,
+        default=None,
+        help="std (px) of the offset of patch B's centre from the true point, as keypoint noise "
+        "has (default: 0 for os, 0.5 for aff); datasets are cached per workdir, so use a new "
+        "workdir for a new value",
     )
     p.add_argument("--width", type=int, default=8)
     p.add_argument("--hidden", type=int, default=128)

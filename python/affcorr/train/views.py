@@ -113,10 +113,12 @@ def similarity_pairs(
     *,
     max_log2_scale: float = 2.0,
     shear: float = 0.1,
+    centre_jitter: float = 0.0,
 ) -> SimilarityPairs:
     """``n`` pairs from random texture points. Each patch reads the texture through
     ``m R(alpha) (I + small shear)``; the shear (up to ``shear``) makes E_os robust to mild
-    affine distortion without changing the labels' meaning much."""
+    affine distortion without changing the labels' meaning much. ``centre_jitter`` (patch B
+    pixels, std) moves patch B's centre off the exact point, as keypoint noise does."""
     log_m_a = rng.uniform(-0.5, 1.0, n)  # texture pixels per patch pixel, log2
     rel = rng.uniform(-max_log2_scale, max_log2_scale, n)  # log2 S_B / S_A
     log_m_b = log_m_a - rel
@@ -132,8 +134,12 @@ def similarity_pairs(
     cy = span / 2 + 1 + rng.uniform(0, 1, n) * np.maximum(texture.h - span - 2, 0)
     c = np.stack([cx, cy], -1)[ok]
     m_a, m_b = m_a[ok], m_b[ok]
+    c_b = c
+    if centre_jitter > 0:  # no draw otherwise: seeded datasets without jitter stay the same
+        shift = centre_jitter * rng.standard_normal((n, 2))[ok]
+        c_b = c + np.einsum("nij,nj->ni", m_b, shift)
     pa = texture.sample(_grid(c, m_a), np.linalg.svd(m_a, compute_uv=False)[:, 0])
-    pb = texture.sample(_grid(c, m_b), np.linalg.svd(m_b, compute_uv=False)[:, 0])
+    pb = texture.sample(_grid(c_b, m_b), np.linalg.svd(m_b, compute_uv=False)[:, 0])
     return SimilarityPairs(
         _photometric(rng, pa, 0.5),
         _photometric(rng, pb, 1.0),
