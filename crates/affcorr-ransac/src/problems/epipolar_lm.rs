@@ -8,6 +8,7 @@
 //! A model with tangent basis ∂F/∂θ_k (k < dof) then has Jacobian rows J_k = ⟨∂r/∂F, ∂F/∂θ_k⟩.
 
 use super::Correspondences;
+use super::simd::{BLOCK, dispatch, dot};
 use crate::refine::{Loss, Mat9, Vec9};
 use affcorr_geom::Mat3;
 
@@ -26,10 +27,8 @@ fn residual_and_gradient(f: &Mat3, x1: [f64; 2], x2: [f64; 2]) -> (f64, [f64; 9]
     }
     let e = p2[0] * l1[0] + p2[1] * l1[1] + l1[2];
     let d = l1[0] * l1[0] + l1[1] * l1[1] + l2[0] * l2[0] + l2[1] * l2[1];
-    if d <= 0.0 {
-        return (0.0, [0.0; 9]);
-    }
-    let inv_sqrt_d = 1.0 / d.sqrt();
+    // r = 0 and g = 0 where d ≤ 0; a select, not a branch, so that blocks vectorise.
+    let inv_sqrt_d = if d > 0.0 { 1.0 / d.sqrt() } else { 0.0 };
     let r = e * inv_sqrt_d;
     let c = r * inv_sqrt_d * inv_sqrt_d; // e / d^{3/2}
     let mut g = [0.0; 9];
@@ -84,7 +83,10 @@ pub(crate) fn normal_equations(
     let dof = basis.len();
     let mut g_sum = [0.0; 9];
     let mut gg = [0.0; 45];
-    let cost = accumulate_dispatch(data, f, indices, loss, &mut g_sum, &mut gg);
+    let cost = dispatch(
+        #[inline(always)]
+        || accumulate(data, f, indices, loss, &mut g_sum, &mut gg),
+    );
     let mut full = Mat9::zeros();
     let mut k = 0;
     for a in 0..9 {
@@ -112,45 +114,9 @@ pub(crate) fn normal_equations(
     cost
 }
 
-/// Data per block of [`accumulate`].
-const BLOCK: usize = 16;
-
-fn accumulate_dispatch(
-    data: &Correspondences,
-    f: &Mat3,
-    indices: &[usize],
-    loss: &Loss,
-    g_sum: &mut [f64; 9],
-    gg: &mut [f64; 45],
-) -> f64 {
-    // The one unsafe call of the crate: runtime CPU dispatch to the same safe code compiled
-    // with AVX2 (the wheel targets baseline x86-64).
-    #[cfg(target_arch = "x86_64")]
-    #[allow(unsafe_code)]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        return unsafe { accumulate_avx2(data, f, indices, loss, g_sum, gg) };
-    }
-    accumulate(data, f, indices, loss, g_sum, gg)
-}
-
-/// [`accumulate`] compiled for AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn accumulate_avx2(
-    data: &Correspondences,
-    f: &Mat3,
-    indices: &[usize],
-    loss: &Loss,
-    g_sum: &mut [f64; 9],
-    gg: &mut [f64; 45],
-) -> f64 {
-    accumulate(data, f, indices, loss, g_sum, gg)
-}
-
 /// Σ ρ(r²) over `indices`, and adds Σ w r g to `g_sum` and the upper triangle of Σ w g gᵀ to
 /// `gg` (row-major), block by block: gather, residuals and gradients lane-wise (the formulas of
-/// [`residual_and_gradient`] without branches), the loss per datum, then the sums as dot
+/// [`residual_and_gradient`]), the loss per datum, then the sums as dot
 /// products over the block.
 #[inline(always)]
 fn accumulate(
@@ -161,7 +127,6 @@ fn accumulate(
     g_sum: &mut [f64; 9],
     gg: &mut [f64; 45],
 ) -> f64 {
-    let fm: [f64; 9] = std::array::from_fn(|k| f[(k / 3, k % 3)]);
     let mut cost = 0.0;
     let (mut x, mut y, mut u, mut v) = ([0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK]);
     let mut r = [0.0; BLOCK];
@@ -174,29 +139,10 @@ fn accumulate(
             (u[j], v[j]) = (data.x2[i].x, data.x2[i].y);
         }
         for j in 0..BLOCK {
-            let p1 = [x[j], y[j], 1.0];
-            let p2 = [u[j], v[j], 1.0];
-            let l1: [f64; 3] =
-                std::array::from_fn(|m| fm[3 * m] * p1[0] + fm[3 * m + 1] * p1[1] + fm[3 * m + 2]);
-            let l2: [f64; 2] =
-                std::array::from_fn(|n| fm[n] * p2[0] + fm[3 + n] * p2[1] + fm[6 + n]);
-            let e = p2[0] * l1[0] + p2[1] * l1[1] + l1[2];
-            let d = l1[0] * l1[0] + l1[1] * l1[1] + l2[0] * l2[0] + l2[1] * l2[1];
-            let inv_sqrt_d = if d > 0.0 { 1.0 / d.sqrt() } else { 0.0 };
-            let rj = e * inv_sqrt_d;
-            let c = rj * inv_sqrt_d * inv_sqrt_d;
+            let (rj, gj) = residual_and_gradient(f, [x[j], y[j]], [u[j], v[j]]);
             r[j] = rj;
-            for m in 0..3 {
-                for n in 0..3 {
-                    let mut dd = 0.0;
-                    if m < 2 {
-                        dd += l1[m] * p1[n];
-                    }
-                    if n < 2 {
-                        dd += l2[n] * p2[m];
-                    }
-                    g[3 * m + n][j] = p2[m] * p1[n] * inv_sqrt_d - c * dd;
-                }
+            for a in 0..9 {
+                g[a][j] = gj[a];
             }
         }
         for j in 0..len {
@@ -219,18 +165,6 @@ fn accumulate(
         }
     }
     cost
-}
-
-/// Σ aⱼ bⱼ in 4 interleaved partial sums, which the compiler maps onto SIMD lanes.
-#[inline(always)]
-fn dot(a: &[f64; BLOCK], b: &[f64; BLOCK]) -> f64 {
-    let mut acc = [0.0; 4];
-    for j in (0..BLOCK).step_by(4) {
-        for l in 0..4 {
-            acc[l] += a[j + l] * b[j + l];
-        }
-    }
-    (acc[0] + acc[1]) + (acc[2] + acc[3])
 }
 
 #[cfg(test)]
@@ -315,7 +249,7 @@ mod tests {
         // dispatched one, short last block included (30 = 16 + 14).
         let (mut s1, mut g1, mut s2, mut g2) = ([0.0; 9], [0.0; 45], [0.0; 9], [0.0; 45]);
         let c1 = accumulate(&data, &f, &idx, &loss, &mut s1, &mut g1);
-        let c2 = accumulate_dispatch(&data, &f, &idx, &loss, &mut s2, &mut g2);
+        let c2 = dispatch(|| accumulate(&data, &f, &idx, &loss, &mut s2, &mut g2));
         assert!((c1 - c2).abs() < 1e-12 * c1);
         for (a, b) in s1.iter().zip(&s2).chain(g1.iter().zip(&g2)) {
             assert!((a - b).abs() <= 1e-12 * a.abs().max(1e-300), "{a} vs {b}");

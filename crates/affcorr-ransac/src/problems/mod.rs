@@ -7,6 +7,7 @@ mod epipolar_lm;
 pub mod fundamental;
 pub mod homography;
 pub mod relpose;
+mod simd;
 
 use crate::error::{RansacError, Result};
 use affcorr_geom::types::{AcRow, PointRow};
