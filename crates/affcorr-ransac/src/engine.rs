@@ -61,10 +61,51 @@ struct Evaluation {
     wide_support: usize,
 }
 
-/// The residual buffer and the count of residuals computed.
-struct Scratch {
+/// The residual buffers and the count of residuals computed.
+///
+/// Every complete [`score_model`] pass leaves all residuals in `latest`; [`Scratch::keep`] moves
+/// them to `kept` when that model becomes the one local optimisation or the final refinement
+/// goes on from, so that their next [`collect_inliers`] (and the final [`inlier_mask`]) read
+/// them instead of recomputing: 8% of a homography run's instructions.
+struct Scratch<M> {
     buf: Vec<f64>,
     evaluations: u64,
+    latest: Vec<f64>,
+    latest_for: Option<M>,
+    kept: Vec<f64>,
+    kept_for: Option<M>,
+}
+
+impl<M: PartialEq> Scratch<M> {
+    fn new(n: usize) -> Self {
+        Self {
+            buf: vec![0.0; BLOCK.min(n)],
+            evaluations: 0,
+            latest: vec![0.0; n],
+            latest_for: None,
+            kept: vec![0.0; n],
+            kept_for: None,
+        }
+    }
+
+    /// Keeps the residuals of the last complete pass (if it was of `model`).
+    fn keep(&mut self, model: &M) {
+        if self.latest_for.as_ref() == Some(model) {
+            std::mem::swap(&mut self.latest, &mut self.kept);
+            std::mem::swap(&mut self.latest_for, &mut self.kept_for);
+        }
+    }
+
+    /// All residuals under `model`, if a complete pass left them.
+    fn cached(&self, model: &M) -> Option<&[f64]> {
+        if self.kept_for.as_ref() == Some(model) {
+            Some(&self.kept)
+        } else if self.latest_for.as_ref() == Some(model) {
+            Some(&self.latest)
+        } else {
+            None
+        }
+    }
 }
 
 /// Scores `model` on all data; `None` as soon as it can beat neither `to_beat` (the best score)
@@ -75,22 +116,36 @@ fn score_model<P: Problem, S: Scoring>(
     model: &P::Model,
     to_beat: f64,
     wide_to_beat: usize,
-    scratch: &mut Scratch,
+    scratch: &mut Scratch<P::Model>,
 ) -> Option<Evaluation> {
     let n = problem.len();
     let thr = scoring.inlier_threshold_sq();
     let wide_thr = thr * LO_TRIGGER_SCALE * LO_TRIGGER_SCALE;
     let (mut score, mut inliers, mut wide_support) = (0.0, 0usize, 0usize);
-    let complete = for_each_block(problem, model, scratch, |start, block| {
-        for &r2 in block {
+    scratch.latest_for = None;
+    let mut start = 0;
+    let mut complete = true;
+    while start < n {
+        let len = BLOCK.min(n - start);
+        let block = &mut scratch.latest[start..start + len];
+        problem.residuals(model, start, block);
+        scratch.evaluations += len as u64;
+        for &r2 in block.iter() {
             score += scoring.quality(r2);
             inliers += usize::from(r2 < thr);
             wide_support += usize::from(r2 < wide_thr);
         }
+        start += len;
         // Even if every remaining datum were perfect, could it still win on either count?
-        let rest = n - start - block.len();
-        score + rest as f64 > to_beat || wide_support + rest > wide_to_beat
-    });
+        let rest = n - start;
+        if !(score + rest as f64 > to_beat || wide_support + rest > wide_to_beat) {
+            complete = false;
+            break;
+        }
+    }
+    if complete {
+        scratch.latest_for = Some(model.clone());
+    }
     complete.then_some(Evaluation {
         score,
         inliers,
@@ -105,14 +160,14 @@ fn collect_inliers<P: Problem, S: Scoring>(
     scoring: &S,
     model: &P::Model,
     scale: f64,
-    scratch: &mut Scratch,
+    scratch: &mut Scratch<P::Model>,
     indices: &mut Vec<usize>,
     weights: &mut Vec<f64>,
 ) {
     indices.clear();
     weights.clear();
     let thr = scoring.inlier_threshold_sq() * scale * scale;
-    for_each_block(problem, model, scratch, |start, block| {
+    let mut visit = |start: usize, block: &[f64]| {
         for (k, &r2) in block.iter().enumerate() {
             if r2 < thr {
                 indices.push(start + k);
@@ -120,7 +175,15 @@ fn collect_inliers<P: Problem, S: Scoring>(
             }
         }
         true
-    });
+    };
+    match scratch.cached(model) {
+        Some(all) => {
+            visit(0, all);
+        }
+        None => {
+            for_each_block(problem, model, scratch, visit);
+        }
+    }
 }
 
 /// Computes the squared residuals of all data block by block into the scratch buffer and hands
@@ -129,7 +192,7 @@ fn collect_inliers<P: Problem, S: Scoring>(
 fn for_each_block<P: Problem>(
     problem: &P,
     model: &P::Model,
-    scratch: &mut Scratch,
+    scratch: &mut Scratch<P::Model>,
     mut visit: impl FnMut(usize, &[f64]) -> bool,
 ) -> bool {
     let n = problem.len();
@@ -269,7 +332,7 @@ impl Sprt {
         model: &P::Model,
         to_beat: f64,
         wide_to_beat: usize,
-        scratch: &mut Scratch,
+        scratch: &mut Scratch<P::Model>,
     ) -> Verdict {
         let n = problem.len();
         let thr = scoring.inlier_threshold_sq();
@@ -429,10 +492,7 @@ where
     let mut rng = Pcg64::seed_from_u64(options.seed);
     let mut sample = vec![0usize; m];
     let mut models: Vec<P::Model> = Vec::with_capacity(16);
-    let mut scratch = Scratch {
-        buf: vec![0.0; BLOCK.min(n)],
-        evaluations: 0,
-    };
+    let mut scratch = Scratch::new(n);
     let (mut lo_indices, mut lo_weights) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let lo = options.local_optimization;
     let mut graph = match (lo, options.lo) {
@@ -603,6 +663,7 @@ where
                 &mut scratch,
             ) {
                 Some(e) if e.score > best.score => {
+                    scratch.keep(&refined);
                     best = Scored {
                         model: refined,
                         score: e.score,
@@ -688,7 +749,7 @@ fn local_optimization<P: Problem, S: Scoring>(
     scoring: &S,
     mut best: Scored<P::Model>,
     options: &RansacOptions,
-    scratch: &mut Scratch,
+    scratch: &mut Scratch<P::Model>,
     mut graph: Option<&mut LoGraph>,
     indices: &mut Vec<usize>,
     weights: &mut Vec<f64>,
@@ -732,6 +793,7 @@ fn local_optimization<P: Problem, S: Scoring>(
             if let Some(e) = score_model(problem, scoring, &model, best.score, usize::MAX, scratch)
                 && e.score > best.score
             {
+                scratch.keep(&model);
                 best = Scored {
                     model,
                     score: e.score,
@@ -787,9 +849,12 @@ fn inlier_mask<P: Problem, S: Scoring>(
     problem: &P,
     scoring: &S,
     model: &P::Model,
-    scratch: &mut Scratch,
+    scratch: &mut Scratch<P::Model>,
 ) -> Vec<bool> {
     let thr = scoring.inlier_threshold_sq();
+    if let Some(all) = scratch.cached(model) {
+        return all.iter().map(|&r2| r2 < thr).collect();
+    }
     let mut mask = Vec::with_capacity(problem.len());
     for_each_block(problem, model, scratch, |_, block| {
         mask.extend(block.iter().map(|&r2| r2 < thr));

@@ -10,7 +10,7 @@ use affcorr_geom::Vec2;
 /// A hypothesise-and-verify problem.
 pub trait Problem: Sync {
     /// The model type (e.g. a 3×3 matrix, a pose).
-    type Model: Clone + Send + Sync;
+    type Model: Clone + PartialEq + Send + Sync;
 
     /// Number of data (correspondences).
     fn len(&self) -> usize;
