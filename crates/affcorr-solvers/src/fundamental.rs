@@ -30,7 +30,7 @@
 
 use crate::normalization::{
     AFFINE_ROW_RADIUS_PX, Gram9, Lsq9, NullSpace, Similarity, Vec9, cofactor, gauss_jordan,
-    mat3_from_vec9, null_vector, smallest_singular3, unit_frobenius,
+    mat3_from_vec9, null_vector, smallest_singular3, unit_frobenius, valid_indexed_input,
 };
 use crate::poly::real_roots;
 use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2};
@@ -128,12 +128,7 @@ pub fn fundamental_8pt_normal_equations(
     out: &mut [Mat3],
 ) -> usize {
     assert!(out.len() >= FUNDAMENTAL_8PT_MAX_SOLUTIONS, "out too short");
-    let n = x1.len();
-    if x2.len() != n
-        || indices.len() < 8
-        || indices.iter().any(|&i| i >= n)
-        || weights.is_some_and(|w| w.len() != indices.len() || !w.iter().all(|v| *v >= 0.0))
-    {
+    if !valid_indexed_input(x1.len(), x2.len(), indices, weights, 8) {
         return 0;
     }
     let Some((t1, t2)) = normalisers(

@@ -32,7 +32,7 @@
 
 use crate::normalization::{
     AFFINE_ROW_RADIUS_PX, Gram9, Lsq9, Similarity, householder_fold, mat3_from_vec9,
-    smallest_singular3, unit_frobenius,
+    smallest_singular3, unit_frobenius, valid_indexed_input,
 };
 use affcorr_geom::{AffineCorrespondence, Mat3, Vec2, Vec3};
 
@@ -221,12 +221,7 @@ pub fn homography_lsq_normal_equations(
     out: &mut [Mat3],
 ) -> usize {
     assert!(out.len() >= HOMOGRAPHY_LSQ_MAX_SOLUTIONS, "out too short");
-    let n = x1.len();
-    if x2.len() != n
-        || indices.len() < 4
-        || indices.iter().any(|&i| i >= n)
-        || weights.is_some_and(|w| w.len() != indices.len() || !w.iter().all(|v| *v >= 0.0))
-    {
+    if !valid_indexed_input(x1.len(), x2.len(), indices, weights, 4) {
         return 0;
     }
     let (Some(t1), Some(t2)) = (

@@ -26,6 +26,22 @@ use nalgebra::SVector;
 /// unweighted rows (ρ from 4 to 16 px all do about equally well).
 pub(crate) const AFFINE_ROW_RADIUS_PX: f64 = 8.0;
 
+/// Whether the indexed, optionally weighted input of a normal-equation solver is usable:
+/// `x2` as long as `x1`, at least `min` indices, all in bounds, and weights (if any) one per
+/// index, each finite and ≥ 0.
+pub(crate) fn valid_indexed_input(
+    n1: usize,
+    n2: usize,
+    indices: &[usize],
+    weights: Option<&[f64]>,
+    min: usize,
+) -> bool {
+    n1 == n2
+        && indices.len() >= min
+        && indices.iter().all(|&i| i < n1)
+        && weights.is_none_or(|w| w.len() == indices.len() && w.iter().all(|v| *v >= 0.0))
+}
+
 /// 9-vector (a 3×3 matrix stacked row-major).
 pub(crate) type Vec9 = SVector<f64, 9>;
 
