@@ -63,10 +63,11 @@ struct Evaluation {
 
 /// The residual buffers and the count of residuals computed.
 ///
-/// Every complete [`score_model`] pass leaves all residuals in `latest`; [`Scratch::keep`] moves
-/// them to `kept` when that model becomes the one local optimisation or the final refinement
-/// goes on from, so that their next [`collect_inliers`] (and the final [`inlier_mask`]) read
-/// them instead of recomputing: 8% of a homography run's instructions.
+/// Every complete [`for_each_block`] pass leaves all residuals in `latest`; [`Scratch::keep`]
+/// moves them to `kept` when that model becomes the one local optimisation or the final
+/// refinement goes on from, so that their next inlier collection (and the final inlier mask)
+/// read them instead of recomputing: 8% of a homography run's instructions. `buf` is the SPRT's
+/// block buffer.
 struct Scratch<M> {
     buf: Vec<f64>,
     evaluations: u64,
@@ -122,30 +123,16 @@ fn score_model<P: Problem, S: Scoring>(
     let thr = scoring.inlier_threshold_sq();
     let wide_thr = thr * LO_TRIGGER_SCALE * LO_TRIGGER_SCALE;
     let (mut score, mut inliers, mut wide_support) = (0.0, 0usize, 0usize);
-    scratch.latest_for = None;
-    let mut start = 0;
-    let mut complete = true;
-    while start < n {
-        let len = BLOCK.min(n - start);
-        let block = &mut scratch.latest[start..start + len];
-        problem.residuals(model, start, block);
-        scratch.evaluations += len as u64;
-        for &r2 in block.iter() {
+    let complete = for_each_block(problem, model, scratch, |start, block| {
+        for &r2 in block {
             score += scoring.quality(r2);
             inliers += usize::from(r2 < thr);
             wide_support += usize::from(r2 < wide_thr);
         }
-        start += len;
         // Even if every remaining datum were perfect, could it still win on either count?
-        let rest = n - start;
-        if !(score + rest as f64 > to_beat || wide_support + rest > wide_to_beat) {
-            complete = false;
-            break;
-        }
-    }
-    if complete {
-        scratch.latest_for = Some(model.clone());
-    }
+        let rest = n - start - block.len();
+        score + rest as f64 > to_beat || wide_support + rest > wide_to_beat
+    });
     complete.then_some(Evaluation {
         score,
         inliers,
@@ -167,7 +154,7 @@ fn collect_inliers<P: Problem, S: Scoring>(
     indices.clear();
     weights.clear();
     let thr = scoring.inlier_threshold_sq() * scale * scale;
-    let mut visit = |start: usize, block: &[f64]| {
+    for_each_block(problem, model, scratch, |start, block| {
         for (k, &r2) in block.iter().enumerate() {
             if r2 < thr {
                 indices.push(start + k);
@@ -175,38 +162,37 @@ fn collect_inliers<P: Problem, S: Scoring>(
             }
         }
         true
-    };
-    match scratch.cached(model) {
-        Some(all) => {
-            visit(0, all);
-        }
-        None => {
-            for_each_block(problem, model, scratch, visit);
-        }
-    }
+    });
 }
 
-/// Computes the squared residuals of all data block by block into the scratch buffer and hands
-/// each block (with its first index) to `visit`, which returns false to stop early. Returns
-/// whether every block was visited.
+/// Hands the squared residuals of all data under `model`, block by block with each block's
+/// first index, to `visit`, which returns false to stop early. Returns whether every block was
+/// visited. The residuals come from the scratch's cache when a complete pass of `model` left
+/// them (as one block); otherwise they are computed into `latest`, and a complete pass leaves
+/// them cached there.
 fn for_each_block<P: Problem>(
     problem: &P,
     model: &P::Model,
     scratch: &mut Scratch<P::Model>,
     mut visit: impl FnMut(usize, &[f64]) -> bool,
 ) -> bool {
+    if let Some(all) = scratch.cached(model) {
+        return visit(0, all);
+    }
+    scratch.latest_for = None;
     let n = problem.len();
     let mut start = 0;
     while start < n {
         let len = BLOCK.min(n - start);
-        let buf = &mut scratch.buf[..len];
-        problem.residuals(model, start, buf);
+        let block = &mut scratch.latest[start..start + len];
+        problem.residuals(model, start, block);
         scratch.evaluations += len as u64;
-        if !visit(start, buf) {
+        if !visit(start, block) {
             return false;
         }
         start += len;
     }
+    scratch.latest_for = Some(model.clone());
     true
 }
 
@@ -852,9 +838,6 @@ fn inlier_mask<P: Problem, S: Scoring>(
     scratch: &mut Scratch<P::Model>,
 ) -> Vec<bool> {
     let thr = scoring.inlier_threshold_sq();
-    if let Some(all) = scratch.cached(model) {
-        return all.iter().map(|&r2| r2 < thr).collect();
-    }
     let mut mask = Vec::with_capacity(problem.len());
     for_each_block(problem, model, scratch, |_, block| {
         mask.extend(block.iter().map(|&r2| r2 < thr));
