@@ -31,8 +31,8 @@
 //! estimates improve about 3× against unweighted rows.
 
 use crate::normalization::{
-    AFFINE_ROW_RADIUS_PX, Gram9, Lsq9, Similarity, householder_fold, mat3_from_vec9,
-    smallest_singular3, unit_frobenius, valid_indexed_input,
+    AFFINE_ROW_RADIUS_PX, Lsq9, Similarity, householder_fold, mat3_from_vec9, smallest_singular3,
+    unit_frobenius, valid_indexed_input,
 };
 use affcorr_geom::{AffineCorrespondence, Mat3, Vec2, Vec3};
 
@@ -52,6 +52,10 @@ pub const HOMOGRAPHY_AC_LSQ_MAX_SOLUTIONS: usize = 1;
 const COLLINEAR_TOL: f64 = 1e-8;
 /// A singular value of a normalised linear system below this × the largest counts as zero.
 const RANK_TOL: f64 = 1e-9;
+/// The same test on an eliminated 3×3 system S = CᵀC − …, whose singular values are squares
+/// of the system's: σ₂(S) ≤ this × σ₁(S) counts as rank-deficient (the system's σ below
+/// 1e-6 × its largest; rounding leaves S's zero eigenvalues near 1e-16 × the largest).
+const REDUCED_RANK_TOL: f64 = 1e-12;
 
 /// The homography of 4 point correspondences (exactly determined).
 ///
@@ -367,7 +371,23 @@ fn affine_rows(p: &Vec2, q: &Vec2, a: &affcorr_geom::Mat2) -> [[f64; 9]; 4] {
     rows
 }
 
-/// The shared AC least-squares path of [`homography_2ac`] and [`homography_ac_lsq`].
+/// The shared AC least-squares path of [`homography_2ac`] and [`homography_ac_lsq`], with the
+/// first two rows of Ĥ eliminated.
+///
+/// Every equation of the AC system (module docs, affine rows weighted by r = ρ·s₁) involves one
+/// of the rows h₁, h₂ of Ĥ = [h₁ᵀ; h₂ᵀ; h₃ᵀ] and h₃: b·hᵢ + c·h₃ = 0 with
+/// (b, c) = (p, −qᵢ·p) for the point row of coordinate i and (−r·eⱼ, r·(âᵢⱼ·p + qᵢ·eⱼ)) for the
+/// affine row (i, j). Stacked, B hᵢ + Cᵢ h₃ = 0 with the same B for i = 1, 2, so for a given h₃
+/// the least-squares rows are hᵢ = −M⁻¹Nᵢ h₃ with M = BᵀB = Σ p pᵀ + n·r²·diag(1, 1, 0)
+/// (positive definite: its (3, 3) entry is n) and Nᵢ = BᵀCᵢ, and h₃ minimises h₃ᵀ S h₃ with
+/// S = Σᵢ (CᵢᵀCᵢ − NᵢᵀM⁻¹Nᵢ): the smallest eigenvector of the 3×3 S (variable projection).
+/// This is the least-squares solution under ‖h₃‖ = 1 instead of ‖h‖ = 1, the same for exact
+/// data; h₃ = 0 would put every point on the line at infinity. 3×3 algebra instead of a 9×9
+/// null space: the 2-AC sample is solved once per RANSAC iteration, and the 9×9 inverse
+/// iteration was 12% of a homography run's instructions.
+///
+/// The null space of the system is one-dimensional exactly when S has rank 2, which
+/// `smallest_singular3` tests (σ₂(S) > [`REDUCED_RANK_TOL`]·σ₁(S)).
 fn ac_least_squares(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize {
     if !acs.iter().all(valid_ac) {
         return 0;
@@ -379,23 +399,44 @@ fn ac_least_squares(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize {
         return 0;
     };
     let scale = t2.s / t1.s;
-    let w = AFFINE_ROW_RADIUS_PX * t1.s;
-    // The Gram matrix, not a QR: this is the 2-AC minimal solver, run once per RANSAC sample,
-    // where the Householder fold of its 12 rows cost most of the solve.
-    let mut gram = Gram9::new();
+    let r = AFFINE_ROW_RADIUS_PX * t1.s;
+    let r2 = r * r;
+    let mut m = Mat3::zeros();
+    let mut nn = [Mat3::zeros(); 2];
+    let mut ctc = Mat3::zeros();
     for ac in acs {
         let (p, q) = (t1.apply(&ac.x1), t2.apply(&ac.x2));
-        for r in point_rows(&p, &q) {
-            gram.add_row(&r);
-        }
-        for r in affine_rows(&p, &q, &(ac.a * scale)) {
-            gram.add_row(&r.map(|v| v * w));
+        let p = Vec3::new(p.x, p.y, 1.0);
+        let a = ac.a * scale;
+        let ppt = p * p.transpose();
+        m += ppt;
+        for i in 0..2 {
+            // The point row: b = p, c = −qᵢ·p.
+            nn[i] -= ppt * q[i];
+            ctc += ppt * (q[i] * q[i]);
+            // The affine rows (i, j): b = −r·eⱼ, c = r·(âᵢⱼ·p + qᵢ·eⱼ).
+            for j in 0..2 {
+                let mut c = p * a[(i, j)];
+                c[j] += q[i];
+                let mut row = nn[i].row_mut(j);
+                row -= c.transpose() * r2;
+                ctc += c * c.transpose() * r2;
+            }
         }
     }
-    match gram.into_lsq() {
-        Some(lsq) => solve_lsq(&lsq, &t1, &t2, out),
-        None => 0,
-    }
+    m[(0, 0)] += acs.len() as f64 * r2;
+    m[(1, 1)] += acs.len() as f64 * r2;
+    let Some(m_inv) = m.try_inverse() else {
+        return 0;
+    };
+    let k = [m_inv * nn[0], m_inv * nn[1]];
+    let s = ctc - nn[0].transpose() * k[0] - nn[1].transpose() * k[1];
+    let Some(h3) = smallest_singular3(&s, false, REDUCED_RANK_TOL) else {
+        return 0;
+    };
+    let (h1, h2) = (-(k[0] * h3), -(k[1] * h3));
+    let h_norm = Mat3::from_rows(&[h1.transpose(), h2.transpose(), h3.transpose()]);
+    finish(&h_norm, &t1, &t2, out)
 }
 
 /// The least-squares null vector as H, if the null space is one-dimensional.

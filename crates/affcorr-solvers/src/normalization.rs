@@ -203,7 +203,7 @@ pub(crate) struct Lsq9 {
 /// The Gram matrix MᵀM of a homogeneous N×9 system, accumulated row by row (45 products per
 /// row, the upper triangle); [`Gram9::into_lsq`] turns it into an [`Lsq9`] through its Cholesky
 /// factor ([`Lsq9::from_gram`], which squares the condition number). For small normalised
-/// systems solved very often, such as the 12 rows of a 2-AC homography sample, where folding
+/// systems solved very often, such as the local optimisation's 8-point fits, where folding
 /// each row by Householder reflections costs several times more.
 #[derive(Debug, Clone)]
 pub(crate) struct Gram9 {
@@ -214,12 +214,6 @@ impl Gram9 {
     /// An empty system.
     pub fn new() -> Self {
         Self { g: [[0.0; 9]; 9] }
-    }
-
-    /// Appends the equation `row · f = 0`.
-    #[inline]
-    pub fn add_row(&mut self, row: &[f64; 9]) {
-        self.add_weighted_row(row, 1.0);
     }
 
     /// Appends the equation `√w·row · f = 0`.
