@@ -125,6 +125,9 @@ fn main() {
         refinements += r;
     }
     let s = scenes as usize;
+    if std::env::var_os("PROFILE_ERRORS").is_some() {
+        println!("errors {err:?}");
+    }
     let e2 = if err2.is_empty() {
         String::new()
     } else {
@@ -132,12 +135,13 @@ fn main() {
     };
     println!(
         "{problem} {sample:?} {extra}: {:.2} ms/run, {} iterations, {:.1} LO runs, {:.1} refinements; \
-         median error {:.4}{e2}, precision {:.4}, recall {:.4}",
+         median error {:.4} (mean {:.4}){e2}, precision {:.4}, recall {:.4}",
         seconds * 1e3 / s as f64,
         iterations / s,
         lo as f64 / s as f64,
         refinements as f64 / s as f64,
         median(&mut err),
+        err.iter().sum::<f64>() / err.len() as f64,
         median(&mut precision),
         median(&mut recall),
     );

@@ -4,7 +4,7 @@
 //! minimal and non-minimal solvers, its residual and its refinement. The engine never looks at
 //! the data itself: samplers, scoring and local optimisation vary independently of the problem.
 
-use crate::refine::Loss;
+use crate::refine::{LmOptions, Loss};
 use affcorr_geom::Vec2;
 
 /// A hypothesise-and-verify problem.
@@ -67,17 +67,25 @@ pub trait Problem: Sync {
         200.0
     }
 
-    /// Polishes `model` on `inliers` by minimising Σ `loss`(rᵢ²) of a geometric error within
-    /// `max_iterations` Levenberg–Marquardt steps; `None` to keep the model as it is. The
-    /// default does nothing.
+    /// Polishes `model` on `inliers` by minimising Σ `loss`(rᵢ²) of a geometric error with
+    /// Levenberg–Marquardt ([`crate::refine::levenberg_marquardt`] under `options`); `None` to
+    /// keep the model as it is. The default does nothing.
     fn refine(
         &self,
         model: &Self::Model,
         inliers: &[usize],
         loss: &Loss,
-        max_iterations: usize,
+        options: &LmOptions,
     ) -> Option<Self::Model> {
-        let _ = (model, inliers, loss, max_iterations);
+        let _ = (model, inliers, loss, options);
         None
+    }
+
+    /// Whether local optimisation tries [`Problem::refine`] beside the linear fit
+    /// ([`Problem::fit_nonminimal`]) at its narrow steps. Default true. A problem whose linear
+    /// fit on the inliers already lands in the final refinement's basin can skip it: LO only
+    /// has to find the inlier set, and the final refinement does the geometric fit.
+    fn lo_refines(&self) -> bool {
+        true
     }
 }

@@ -160,14 +160,16 @@ impl Problem for HomographyProblem<'_> {
         model: &Mat3,
         inliers: &[usize],
         loss: &Loss,
-        max_iterations: usize,
+        options: &LmOptions,
     ) -> Option<Mat3> {
         let h = model / model.norm();
-        let options = LmOptions {
-            max_iterations,
-            ..Default::default()
-        };
-        Some(levenberg_marquardt(self, &h, inliers, loss, &options).0)
+        Some(levenberg_marquardt(self, &h, inliers, loss, options).0)
+    }
+
+    /// The normalised DLT on the inliers is close to the transfer-error optimum: LM inside LO
+    /// changed no median error over 200 profile scenes and was 20% of a run's instructions.
+    fn lo_refines(&self) -> bool {
+        false
     }
 }
 
@@ -434,7 +436,17 @@ mod tests {
         // A rough start: the linear fit on 6 points. (On all 200 the linear fit is already
         // within a tenth of a standard error of the optimum, and LM stops at once.)
         let rough = problem.fit_nonminimal(&all[..6], None).unwrap();
-        let refined = problem.refine(&rough, &all, &Loss::Squared, 50).unwrap();
+        let refined = problem
+            .refine(
+                &rough,
+                &all,
+                &Loss::Squared,
+                &LmOptions {
+                    max_iterations: 50,
+                    ..Default::default()
+                },
+            )
+            .unwrap();
         let linear = problem.fit_nonminimal(&all, None).unwrap();
         let (c0, c1, c_linear) = (
             problem.cost(&rough, &all, &Loss::Squared),

@@ -205,21 +205,9 @@ impl Problem for RelativePoseProblem<'_> {
         model: &PoseModel,
         inliers: &[usize],
         loss: &Loss,
-        max_iterations: usize,
+        options: &LmOptions,
     ) -> Option<PoseModel> {
-        Some(
-            levenberg_marquardt(
-                self,
-                model,
-                inliers,
-                loss,
-                &LmOptions {
-                    max_iterations,
-                    ..Default::default()
-                },
-            )
-            .0,
-        )
+        Some(levenberg_marquardt(self, model, inliers, loss, options).0)
     }
 }
 
