@@ -230,13 +230,6 @@ impl Problem for FundamentalProblem<'_> {
         let f = self.to_pixels(&refined.matrix());
         Some(f / f.norm())
     }
-
-    /// The 8-point fit on the inliers (rank 2 enforced) lands in the final refinement's basin:
-    /// LM inside LO changed no median Sampson error over 200 profile scenes and was 22% of a
-    /// run's instructions.
-    fn lo_refines(&self) -> bool {
-        false
-    }
 }
 
 /// F = U diag(1, σ, 0) Vᵀ with U, V rotations and 0 ≤ σ ≤ 1: every rank-2 matrix up to scale
