@@ -63,12 +63,15 @@ def test_smoke_run_writes_csv_markdown_and_plots(tmp_path):
     pytest.importorskip("matplotlib")
     cmd = [sys.executable, str(PEERS / "run.py"), "--smoke", "--groups", "affcorr"]
     p = subprocess.run(
-        [*cmd, "--rounds", "2", "--out", str(tmp_path)], capture_output=True, text=True
+        [*cmd, "--rounds", "2", "--repeat", "2", "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
     )
     assert p.returncode == 0, p.stderr[-2000:]
     md = (tmp_path / "summary.md").read_text()
     assert "benches/peers/run.py --smoke" in md and "affcorr-AC" in md
     assert "2 rounds that alternate the groups" in md
+    assert "2 calls per scene back to back" in md
     rows = (tmp_path / "results.csv").read_text().splitlines()
     # header + 3 problems x 5 affcorr methods (AC, AC-msac, AC-magsac, AC-graph_cut, points)
     assert len(rows) == 1 + 3 * 5

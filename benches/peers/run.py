@@ -136,21 +136,22 @@ def metrics(problem: str, s: dict, r: dict | None) -> dict:
 # --- running ---------------------------------------------------------------------------------
 
 
-def worker_env() -> dict:
+def worker_env(repeat: int = 1) -> dict:
     env = dict(os.environ)
+    env["PEERS_REPEAT"] = str(repeat)
     for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "RAYON_NUM_THREADS"):
         env[k] = "1"
     env["PYTHONWARNINGS"] = "ignore"
     return env
 
 
-def run_group(group, problem, scene_file, out_file, only=()) -> dict:
+def run_group(group, problem, scene_file, out_file, only=(), repeat=1) -> dict:
     py = GROUP_PYTHON[group]
     if not py.exists():
         return {"group_error": f"{py} missing: run benches/peers/setup.sh"}
     cmd = [str(py), str(HERE / "worker.py"), group, problem, str(THRESHOLD[problem])]
     cmd += [str(scene_file), str(out_file), *only]
-    p = subprocess.run(cmd, env=worker_env(), capture_output=True, text=True)
+    p = subprocess.run(cmd, env=worker_env(repeat), capture_output=True, text=True)
     if p.returncode != 0 or not Path(out_file).exists():
         return {"group_error": f"worker failed ({p.returncode}): {p.stderr[-800:]}"}
     z = np.load(out_file)
@@ -387,6 +388,7 @@ def markdown(
     load=None,
     rows=(),
     rounds=1,
+    repeat=1,
 ) -> str:
     L = [f"# Peer benchmark ({mode})", "", "```", command, "```", ""]
     load_text = (
@@ -398,6 +400,7 @@ def markdown(
         f"Generated {generated} in {elapsed:.0f} s on "
         f"{os.cpu_count()} cores (shared; other jobs may have run at the same time, so times are "
         "indicative). Every method single-threaded, untimed warm-up first; "
+        + (f"{repeat} calls per scene back to back, the fastest counts; " if repeat > 1 else "")
         + (
             f"{rounds} rounds that alternate the groups, a scene's time is the fastest of its "
             "rounds (a slow spell of the machine then hits every library alike)."
@@ -580,9 +583,17 @@ def main(argv=None) -> int:
         action="store_true",
         help="re-render summary.md and the plots from results.csv and meta.json in --out",
     )
+    ap.add_argument(
+        "--repeat",
+        type=int,
+        default=1,
+        help="calls per scene and method, back to back; keep the fastest",
+    )
     args = ap.parse_args(argv)
     if args.rounds < 1:
         ap.error(f"--rounds must be at least 1, got {args.rounds}")
+    if args.repeat < 1:
+        ap.error(f"--repeat must be at least 1, got {args.repeat}")
     if args.report_only:
         return report(args.out)
     command = "OMP_NUM_THREADS=1 RAYON_NUM_THREADS=1 " + " ".join(
@@ -635,7 +646,13 @@ def main(argv=None) -> int:
                                 f"{problem}: kornia skipped at N > {KORNIA_MAX_N} "
                                 "(batched torch RANSAC)"
                             )
-                    raw = run_group(group, problem, sfile, Path(tmp) / f"{problem}-{group}.npz")
+                    raw = run_group(
+                        group,
+                        problem,
+                        sfile,
+                        Path(tmp) / f"{problem}-{group}.npz",
+                        repeat=args.repeat,
+                    )
                     if round_ == 0:
                         collect(problem, group, use, raw, rows, versions, notes)
                     else:
@@ -654,6 +671,7 @@ def main(argv=None) -> int:
         mode=mode,
         grid=grid,
         rounds=args.rounds,
+        repeat=args.repeat,
         load_average=dict(start=load_start, end=[round(x, 2) for x in os.getloadavg()]),
         versions=sorted(versions),
         notes=notes,
@@ -698,6 +716,7 @@ def report(outdir: Path) -> int:
         meta.get("load_average"),
         rows,
         meta.get("rounds", 1),
+        meta.get("repeat", 1),
     )
     (outdir / "summary.md").write_text(md)
     print(md)

@@ -2,14 +2,16 @@
 
     python worker.py GROUP PROBLEM THRESHOLD scenes.npz out.npz [METHOD ...]
 
-Each method runs once on each scene, after one untimed warm-up call on the first scene. The
-time is the wall-clock time of the call alone (data already in memory, in the library's layout).
+Each method runs on each scene PEERS_REPEAT times back to back (environment, default 1), after
+one untimed warm-up call on the first scene. The time is the wall-clock time of the fastest call
+alone (data already in memory, in the library's layout).
 out.npz holds, for method m and scene i: ``m/i/time``, ``m/i/ok``, and the model and ``inliers``
 when ok; errors go to ``m/i/error``.
 """
 
 from __future__ import annotations
 
+import os
 import sys
 import time
 import traceback
@@ -38,6 +40,9 @@ def versions() -> str:
 def main(argv: list[str]) -> int:
     group, problem, thr, src, dst, *only = argv
     thr = float(thr)
+    # PEERS_REPEAT calls per scene, back to back; the time is the fastest (the result is the
+    # last call's: every method here is seeded or deterministic on these inputs).
+    repeat = max(1, int(os.environ.get("PEERS_REPEAT", "1")))
     data = scene_io.load(src)
     try:
         factories = methods.GROUPS[group]()
@@ -55,14 +60,18 @@ def main(argv: list[str]) -> int:
             pass
         for i, s in enumerate(data):
             key = f"{name}/{i}/"
-            t0 = time.perf_counter()
-            try:
-                r = f(s, thr)
-                out[key + "time"] = np.float64(time.perf_counter() - t0)
-            except Exception:
-                out[key + "time"] = np.float64(time.perf_counter() - t0)
-                out[key + "error"] = np.str_(traceback.format_exc(limit=2)[-500:])
-                r = None
+            best = np.inf
+            for _ in range(repeat):
+                t0 = time.perf_counter()
+                try:
+                    r = f(s, thr)
+                    best = min(best, time.perf_counter() - t0)
+                except Exception:
+                    best = min(best, time.perf_counter() - t0)
+                    out[key + "error"] = np.str_(traceback.format_exc(limit=2)[-500:])
+                    r = None
+                    break
+            out[key + "time"] = np.float64(best)
             out[key + "ok"] = np.bool_(r is not None)
             for k, v in (r or {}).items():
                 out[key + k] = np.asarray(v)
