@@ -166,8 +166,9 @@ pub const MAGSAC_K_SQ: f64 = 13.276_704_135_987_6;
 /// ρ̂(u) = ρ(r)/ρ(τ) and dρ̂/du at u = i/TABLE.
 #[derive(Debug)]
 pub struct MagsacTable {
-    loss: Vec<f64>,
-    slope: Vec<f64>,
+    /// Fixed-length, so that the clamped index needs no bounds check in the hot loops.
+    loss: Box<[f64; TABLE + 2]>,
+    slope: Box<[f64; TABLE + 2]>,
 }
 
 impl MagsacTable {
@@ -185,15 +186,26 @@ impl MagsacTable {
                 loss.push(f(u * b) / fb);
                 slope.push(b * (upper_gamma_3_2(u * b) - gb) / fb);
             }
-            MagsacTable { loss, slope }
+            let fixed = |v: Vec<f64>| -> Box<[f64; TABLE + 2]> {
+                v.into_boxed_slice().try_into().expect("TABLE + 2 entries")
+            };
+            MagsacTable {
+                loss: fixed(loss),
+                slope: fixed(slope),
+            }
         })
     }
 
+    /// The interval of u and the position in it.
     #[inline(always)]
-    fn lerp(table: &[f64], u: f64) -> f64 {
+    fn locate(u: f64) -> (usize, f64) {
         let x = u * TABLE as f64;
         let i = (x as usize).min(TABLE);
-        let t = x - i as f64;
+        (i, x - i as f64)
+    }
+
+    #[inline(always)]
+    fn lerp(table: &[f64; TABLE + 2], (i, t): (usize, f64)) -> f64 {
         table[i] + t * (table[i + 1] - table[i])
     }
 
@@ -203,7 +215,7 @@ impl MagsacTable {
         if !(u < 1.0) {
             return 1.0;
         }
-        Self::lerp(&self.loss, u.max(0.0))
+        Self::lerp(&self.loss, Self::locate(u.max(0.0)))
     }
 
     /// dρ̂/du for u ∈ [0, 1] (0 beyond).
@@ -212,7 +224,17 @@ impl MagsacTable {
         if !(u < 1.0) {
             return 0.0;
         }
-        Self::lerp(&self.slope, u.max(0.0))
+        Self::lerp(&self.slope, Self::locate(u.max(0.0)))
+    }
+
+    /// (ρ̂(u), dρ̂/du) with one table search: (1, 0) beyond u = 1.
+    #[inline(always)]
+    pub fn loss_and_slope(&self, u: f64) -> (f64, f64) {
+        if !(u < 1.0) {
+            return (1.0, 0.0);
+        }
+        let at = Self::locate(u.max(0.0));
+        (Self::lerp(&self.loss, at), Self::lerp(&self.slope, at))
     }
 }
 

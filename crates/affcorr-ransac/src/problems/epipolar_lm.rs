@@ -48,19 +48,33 @@ fn residual_and_gradient(f: &Mat3, x1: [f64; 2], x2: [f64; 2]) -> (f64, [f64; 9]
     (r, g)
 }
 
-/// Σ ρ(SD_P) over `indices` under `f`.
+/// Σ ρ(SD_P) over `indices` under `f`, block by block like [`normal_equations`] (LM calls it
+/// once per trial step).
 pub(crate) fn cost(data: &Correspondences, f: &Mat3, indices: &[usize], loss: &Loss) -> f64 {
-    indices
-        .iter()
-        .map(|&i| {
-            let (r, _) = residual_and_gradient(
-                f,
-                [data.x1[i].x, data.x1[i].y],
-                [data.x2[i].x, data.x2[i].y],
-            );
-            loss.cost(r * r)
-        })
-        .sum()
+    dispatch(
+        #[inline(always)]
+        || {
+            let mut cost = 0.0;
+            let (mut x, mut y, mut u, mut v) =
+                ([0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK]);
+            let mut s = [0.0; BLOCK];
+            for chunk in indices.chunks(BLOCK) {
+                for (j, &i) in chunk.iter().enumerate() {
+                    (x[j], y[j]) = (data.x1[i].x, data.x1[i].y);
+                    (u[j], v[j]) = (data.x2[i].x, data.x2[i].y);
+                }
+                for j in 0..BLOCK {
+                    let (r, _) = residual_and_gradient(f, [x[j], y[j]], [u[j], v[j]]);
+                    s[j] = r * r;
+                }
+                cost += s[..chunk.len()]
+                    .iter()
+                    .map(|&sj| loss.cost(sj))
+                    .sum::<f64>();
+            }
+            cost
+        },
+    )
 }
 
 /// Adds JᵀWJ and JᵀWr for the tangent `basis` (∂F/∂θ_k) and returns the cost.
@@ -146,10 +160,10 @@ fn accumulate(
             }
         }
         for j in 0..len {
-            let s = r[j] * r[j];
-            cost += loss.cost(s);
-            w[j] = loss.weight(s);
-            wr[j] = w[j] * r[j];
+            let (c, wj) = loss.cost_and_weight(r[j] * r[j]);
+            cost += c;
+            w[j] = wj;
+            wr[j] = wj * r[j];
         }
         // The tail of a short last block (stale but finite values) must not count.
         w[len..].fill(0.0);

@@ -7,6 +7,7 @@
 //! - Residual (px²): the point Sampson distance SD_P, plus, with `affine_weight` λ > 0,
 //!   λ·(SD_A,1 + SD_A,2), the affine Sampson distances of DESIGN.md §3.
 
+use super::simd::dispatch;
 use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, epipolar_lm};
 use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Loss, Mat9, Vec9, levenberg_marquardt};
@@ -130,13 +131,18 @@ pub(crate) fn epipolar_residuals(
     // The hot loop of scoring: slices instead of indices and no loop-invariant branch inside,
     // so that the compiler can vectorise it.
     let end = start + out.len();
-    for ((o, x1), x2) in out
-        .iter_mut()
-        .zip(&data.x1[start..end])
-        .zip(&data.x2[start..end])
-    {
-        *o = sampson_point(f, &PointCorrespondence { x1: *x1, x2: *x2 });
-    }
+    dispatch(
+        #[inline(always)]
+        || {
+            for ((o, x1), x2) in out
+                .iter_mut()
+                .zip(&data.x1[start..end])
+                .zip(&data.x2[start..end])
+            {
+                *o = sampson_point(f, &PointCorrespondence { x1: *x1, x2: *x2 });
+            }
+        },
+    );
 }
 
 /// [`epipolar_residuals`] of the data `indices`, in their order (the SPRT's random order).

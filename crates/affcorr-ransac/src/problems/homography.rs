@@ -143,9 +143,14 @@ impl Problem for HomographyProblem<'_> {
         // inside, so that the compiler can vectorise it.
         let end = start + out.len();
         let (x1, x2) = (&self.data.x1[start..end], &self.data.x2[start..end]);
-        for ((o, p), q) in out.iter_mut().zip(x1).zip(x2) {
-            *o = transfer(h, p, q).0;
-        }
+        dispatch(
+            #[inline(always)]
+            || {
+                for ((o, p), q) in out.iter_mut().zip(x1).zip(x2) {
+                    *o = transfer(h, p, q).0;
+                }
+            },
+        );
     }
 
     fn residuals_at(&self, h: &Mat3, indices: &[usize], out: &mut [f64]) {
@@ -204,8 +209,9 @@ impl HomographyProblem<'_> {
                 (p[0][j], p[1][j], p[2][j]) = (x1[j].x * inv_w, x1[j].y * inv_w, inv_w);
             }
             for j in 0..len {
-                cost += loss.cost(r2[j]);
-                w[j] = loss.weight(r2[j]);
+                let c;
+                (c, w[j]) = loss.cost_and_weight(r2[j]);
+                cost += c;
             }
             // The tail of a short last block (stale but finite values) must not count.
             w[len..].fill(0.0);
