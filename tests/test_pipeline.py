@@ -104,6 +104,23 @@ def test_correct_matches_and_homography_on_graffiti(matcher, data):
     assert res.timings["ransac"] > 0 and res.timings["total"] >= res.timings["ransac"]
 
 
+def test_affine_refinement_in_the_pipeline(data):
+    """refine_affine=True is refine_affine on the network's ACs (full resolution: the working
+    images are the originals), and improves A at the correct matches."""
+    _, _, H_gt = data
+    kw = dict(max_keypoints=1024, threads=2)
+    plain = affcorr.Pipeline("xfeat", **kw).match_pair(A_PATH, B_PATH)
+    res = affcorr.Pipeline("xfeat", refine_affine=True, **kw).match_pair(A_PATH, B_PATH)
+    expected = affcorr.refine_affine(A_PATH, B_PATH, plain.corrs)
+    np.testing.assert_array_equal(res.corrs, expected.corrs)
+    assert res.timings["affine_refine"] > 0
+    correct = R.correct_within(plain.corrs[:, :2], plain.corrs[:, 2:4], H_gt)
+    gt = affcorr.affine_from_homography(H_gt, plain.corrs[correct, :2]).reshape(-1, 4)
+    before = np.linalg.norm(plain.corrs[correct, 4:] - gt, axis=1)
+    after = np.linalg.norm(res.corrs[correct, 4:] - gt, axis=1)
+    assert np.median(after) < 0.5 * np.median(before), (np.median(after), np.median(before))
+
+
 def test_match_result_layout_and_certainty(data):
     a, b, H_gt = data
     res = pipeline("xfeat").match_pair(A_PATH, B_PATH)
@@ -120,10 +137,12 @@ def test_match_result_layout_and_certainty(data):
         "matching",
         "patches",
         "shape_net",
+        "affine_refine",
         "ransac",
         "total",
     }
     assert res.timings["decode"] > 0 and res.timings["ransac"] == 0
+    assert res.timings["affine_refine"] == 0
     assert res.timings["total"] >= sum(v for k, v in res.timings.items() if k != "total") * 0.99
     # The A of each AC is the shape network's at those points: the same as ShapeEstimator's.
     est = affcorr.ShapeEstimator(threads=2)

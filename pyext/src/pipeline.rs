@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use crate::arrays::{flatten, to_numpy};
 use crate::runner::{gray_image, py_error};
 use affcorr::runner::{
-    GrayImage, ImageSource, Matcher, Matches, Pipeline, RgbImage, init_ort as init,
+    AffineRefineOptions, GrayImage, ImageSource, Matcher, Matches, Pipeline, RgbImage, init_ort as init,
 };
 use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
@@ -127,7 +127,7 @@ impl PipelineRunner {
     #[pyo3(signature = (
         *, matcher, shape_model, backbone_model = None, refine_model = None,
         lighterglue_model = None, dense_model = None, ort_library = None, max_keypoints = None,
-        max_matches = None, max_side = None, threads = None, seed = 0
+        max_matches = None, max_side = None, threads = None, seed = 0, refine_affine = false
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -144,6 +144,7 @@ impl PipelineRunner {
         max_side: Option<usize>,
         threads: Option<usize>,
         seed: u64,
+        refine_affine: bool,
     ) -> PyResult<Self> {
         let matcher: Matcher = matcher.parse().map_err(|e| py_error(e, None))?;
         let mut b = Pipeline::builder()
@@ -179,6 +180,9 @@ impl PipelineRunner {
         }
         if let Some(n) = threads {
             b = b.threads(n);
+        }
+        if refine_affine {
+            b = b.affine_refinement(AffineRefineOptions::default());
         }
         py.detach(|| {
             init(ort_library.as_deref())?;

@@ -15,8 +15,9 @@ use std::path::PathBuf;
 
 use crate::arrays::{Dim, F64Array, flatten, to_numpy};
 use affcorr::runner::{
-    GrayImage, Patches, PixelData, RunnerError, ShapeEstimator, ShapeModelOptions, ShapeOutputs,
-    extract_patches as extract, init_ort as init, ort_library as loaded_library,
+    AffineRefineOptions, GrayImage, Patches, PixelData, RunnerError, ShapeEstimator,
+    ShapeModelOptions, ShapeOutputs, extract_patches as extract, init_ort as init,
+    ort_library as loaded_library, refine_affine,
 };
 use numpy::ndarray::{ArrayD, IxDyn};
 use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
@@ -30,6 +31,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(ort_library, m)?)?;
     m.add_function(wrap_pyfunction!(extract_patches, m)?)?;
     m.add_function(wrap_pyfunction!(read_gray_image, m)?)?;
+    m.add_function(wrap_pyfunction!(refine_affine_py, m)?)?;
     Ok(())
 }
 
@@ -369,4 +371,47 @@ fn read_gray_image<'py>(py: Python<'py>, image: &Bound<'py, PyAny>) -> PyResult<
     let img = gray_image(py, image, "image")?;
     let (h, w) = (img.height(), img.width());
     f32_array(py, &[h, w], img.into_data())
+}
+
+/// Affine Lucas–Kanade refinement of ACs; see `affcorr.refine_affine` for the documentation.
+/// Returns `(corrs (N, 8), refined (N,) bool, zncc (N,))`.
+#[pyfunction]
+#[pyo3(name = "refine_affine")]
+#[pyo3(signature = (image_a, image_b, corrs, *, radius, blur_sigmas, iterations, min_zncc, move_points))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn refine_affine_py<'py>(
+    py: Python<'py>,
+    image_a: &Bound<'py, PyAny>,
+    image_b: &Bound<'py, PyAny>,
+    corrs: &Bound<'py, PyAny>,
+    radius: usize,
+    blur_sigmas: Vec<f64>,
+    iterations: usize,
+    min_zncc: f64,
+    move_points: bool,
+) -> PyResult<(F64<'py>, Bound<'py, PyArrayDyn<bool>>, F64<'py>)> {
+    let rows = F64Array::extract(corrs, "corrs")?
+        .expect(&[N, Dim::Is(8)])?
+        .rows::<8>()
+        .to_vec();
+    let img_a = gray_image(py, image_a, "image_a")?;
+    let img_b = gray_image(py, image_b, "image_b")?;
+    let options = AffineRefineOptions {
+        radius,
+        blur_sigmas,
+        iterations,
+        min_zncc,
+        move_points,
+    };
+    let r = py
+        .detach(|| refine_affine(&img_a, &img_b, &rows, &options))
+        .map_err(|e| py_error(e, None))?;
+    let n = r.corrs.len();
+    let refined = ArrayD::from_shape_vec(IxDyn(&[n]), r.refined)
+        .map_err(|e| PyRuntimeError::new_err(format!("internal shape error: {e}")))?;
+    Ok((
+        to_numpy(py, &[n, 8], flatten(r.corrs))?,
+        refined.into_pyarray(py),
+        f64_vec(py, r.zncc)?,
+    ))
 }

@@ -58,7 +58,14 @@ from .estimation import (
     estimate_relative_pose_batch,
 )
 from .pipeline import MatchResult, Pipeline
-from .shape import ShapeEstimate, ShapeEstimator, extract_patches, read_gray_image
+from .shape import (
+    AffineRefinement,
+    ShapeEstimate,
+    ShapeEstimator,
+    extract_patches,
+    read_gray_image,
+    refine_affine,
+)
 
 __all__ = [
     "__version__",
@@ -73,10 +80,12 @@ __all__ = [
     "estimate_relative_pose_batch",
     "MatchResult",
     "Pipeline",
+    "AffineRefinement",
     "ShapeEstimate",
     "ShapeEstimator",
     "extract_patches",
     "read_gray_image",
+    "refine_affine",
     "affine_from_homography",
     "affine_to_laf",
     "correspondences_from_homography",

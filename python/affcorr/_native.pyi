@@ -284,6 +284,20 @@ def extract_patches(image: Any, xy: ArrayLike) -> NDArray[np.float32]:
 def read_gray_image(image: Any) -> NDArray[np.float32]:
     """(H, W) float32 gray in [0, 1]; colour is 0.299 R + 0.587 G + 0.114 B, alpha ignored."""
 
+def refine_affine(
+    image_a: Any,
+    image_b: Any,
+    corrs: ArrayLike,
+    *,
+    radius: int,
+    blur_sigmas: list[float],
+    iterations: int,
+    min_zncc: float,
+    move_points: bool,
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
+    """Affine Lucas-Kanade refinement of ACs (wrapped by affcorr.refine_affine): (corrs (N, 8),
+    refined (N,) bool, zncc (N,))."""
+
 # --- end-to-end pipeline (issue 6; wrapped by affcorr.pipeline) ----------------------------
 
 class PipelineRunner:
@@ -308,6 +322,7 @@ class PipelineRunner:
         max_side: int | None = None,
         threads: int | None = None,
         seed: int = 0,
+        refine_affine: bool = False,
     ) -> None: ...
     def match_pair(
         self, image_a: Any, image_b: Any

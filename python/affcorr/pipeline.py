@@ -78,7 +78,8 @@ class MatchResult:
             in the original images' pixels, most certain first.
         certainty: ``(N,)`` the matcher's certainty of each match (higher is better).
         timings: seconds per stage: ``decode``, ``matcher``, ``detection``, ``matching``,
-            ``patches``, ``shape_net``, ``ransac`` (0 unless estimated), ``total``.
+            ``patches``, ``shape_net``, ``affine_refine`` (0 unless enabled), ``ransac`` (0
+            unless estimated), ``total``.
         num_keypoints: keypoints (or semi-dense cells) found in image A and in image B.
     """
 
@@ -132,6 +133,11 @@ class Pipeline:
             RoMa to it; none is shipped).
         seed: seed of the dense matcher's balanced sampling (the same seed gives the same
             matches).
+        refine_affine: refine the network's ACs against the images by affine Lucas-Kanade
+            (:func:`affcorr.refine_affine` with its defaults; x2 moves too). Off by default;
+            it costs about as much as the shape network and takes the affine error of the
+            ACs it refines from ~0.4 to ~0.03 (benches/results/shape_accuracy.md); timed as
+            ``affine_refine``.
 
     Every model's ONNX contract is checked on loading.
 
@@ -156,6 +162,7 @@ class Pipeline:
         models_dir: str | os.PathLike[str] | None = None,
         dense_model: str | os.PathLike[str] | None = None,
         seed: int = 0,
+        refine_affine: bool = False,
     ) -> None:
         if matcher is None:
             matcher = "dense" if dense_model is not None else "xfeat-lighterglue"
@@ -206,6 +213,7 @@ class Pipeline:
             max_side=max_side,
             threads=threads,
             seed=int(seed),
+            refine_affine=bool(refine_affine),
         )
 
     # ----------------------------------------------------------------- properties

@@ -3,6 +3,7 @@
 //!
 //! - [`ort_env`]: loads ONNX Runtime at run time (`ORT_DYLIB_PATH` or [`init_ort`]); one
 //!   environment per process.
+//! - [`affine_refine`]: affine Lucas–Kanade refinement of ACs against the two images.
 //! - [`image`]: PNG/JPEG decoding and raw buffers to grayscale `f32` in [0, 1].
 //! - [`patches`]: 32×32 bilinear patches at sub-pixel centres, `(N, 1, 32, 32)`.
 //! - [`shape`]: the shape network's ONNX contract (`shape-v1`), batched inference and the
@@ -37,6 +38,7 @@
 //! # Ok::<(), affcorr_runner::RunnerError>(())
 //! ```
 
+pub mod affine_refine;
 pub mod contract;
 pub mod dense;
 pub mod error;
@@ -49,6 +51,7 @@ pub mod patches;
 pub mod pipeline;
 pub mod shape;
 
+pub use affine_refine::{AffineRefineOptions, AffineRefinement, refine_affine};
 pub use error::{Result, RunnerError};
 pub use estimator::{ShapeEstimate, ShapeEstimator};
 pub use image::{GrayImage, PixelData};
