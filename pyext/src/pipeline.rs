@@ -15,7 +15,8 @@ use std::time::{Duration, Instant};
 use crate::arrays::{flatten, to_numpy};
 use crate::runner::{gray_image, py_error};
 use affcorr::runner::{
-    AffineRefineOptions, GrayImage, ImageSource, Matcher, Matches, Pipeline, RgbImage, init_ort as init,
+    AffineRefineOptions, GrayImage, ImageSource, Matcher, Matches, Pipeline, RgbImage,
+    init_ort as init,
 };
 use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
