@@ -83,7 +83,10 @@ fn bench(c: &mut Criterion) {
         .expect("rayon pool");
     let refined = pool.install(|| refine_affine(&img_a, &img_b, &corrs, &options).unwrap());
     let share = refined.refined.iter().filter(|r| **r).count() as f64 / ACS as f64;
-    assert!(share > 0.95, "only {share} of the ACs refined: not a benchmark of success");
+    assert!(
+        share > 0.95,
+        "only {share} of the ACs refined: not a benchmark of success"
+    );
 
     let mut group = c.benchmark_group("affine_refine");
     group.sample_size(20);

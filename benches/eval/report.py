@@ -354,6 +354,14 @@ def affine_sentences(rows: list[dict]) -> list[str]:
         name = MATCHER_NAMES.get(m, m)
         full, os_, own = num(r["fro_mean_full"]), num(r["fro_mean_os"]), num(r["fro_mean_own"])
         cf, cown = num(r["cos_mean_full"]), num(r["cos_mean_own"])
+        lk = num(r.get("fro_mean_lk", "nan"))
+        refined = (
+            ""
+            if math.isnan(lk)
+            else f" Refined against the images by affine Lucas-Kanade (affcorr.refine_affine): "
+            f"mean {lk:.3f}, median {num(r['fro_median_lk']):.3f}, cosine "
+            f"{num(r['cos_mean_lk']):.3f}."
+        )
         if m == "affcorr":
             out.append(
                 f"At affcorr's own matches: mean |A - A_gt|_F {full:.3f} with the residual shape "
@@ -363,13 +371,14 @@ def affine_sentences(rows: list[dict]) -> list[str]:
                     if full < os_
                     else ": A″ does not improve on (O,S) here."
                 )
+                + refined
             )
             continue
         head = f"At {name}'s matches ({r['pairs']} pairs, {r['n']} matches): "
         if math.isnan(own):
             out.append(
                 head + f"{name} has no A of its own; affcorr's shape network at its matches: mean "
-                f"Frobenius error {full:.3f}, cosine similarity {cf:.3f}."
+                f"Frobenius error {full:.3f}, cosine similarity {cf:.3f}." + refined
             )
             continue
         if full < own:
@@ -386,7 +395,7 @@ def affine_sentences(rows: list[dict]) -> list[str]:
         out.append(
             head + f"affcorr's A is {'closer to' if full < own else 'not closer to'} the truth "
             f"than {name}'s own (mean Frobenius error {full:.3f} vs {own:.3f}, cosine "
-            f"similarity {cf:.3f} vs {cown:.3f})" + (f"; {why}." if why else ".")
+            f"similarity {cf:.3f} vs {cown:.3f})" + (f"; {why}." if why else ".") + refined
         )
     return [f"- {t}" for t in out]
 

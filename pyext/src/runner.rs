@@ -377,7 +377,9 @@ fn read_gray_image<'py>(py: Python<'py>, image: &Bound<'py, PyAny>) -> PyResult<
 /// Returns `(corrs (N, 8), refined (N,) bool, zncc (N,))`.
 #[pyfunction]
 #[pyo3(name = "refine_affine")]
-#[pyo3(signature = (image_a, image_b, corrs, *, radius, blur_sigmas, iterations, min_zncc, move_points))]
+#[pyo3(signature = (
+    image_a, image_b, corrs, *, radius, blur_sigmas, iterations, min_zncc, move_points, try_identity
+))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn refine_affine_py<'py>(
     py: Python<'py>,
@@ -389,6 +391,7 @@ fn refine_affine_py<'py>(
     iterations: usize,
     min_zncc: f64,
     move_points: bool,
+    try_identity: bool,
 ) -> PyResult<(F64<'py>, Bound<'py, PyArrayDyn<bool>>, F64<'py>)> {
     let rows = F64Array::extract(corrs, "corrs")?
         .expect(&[N, Dim::Is(8)])?
@@ -402,6 +405,7 @@ fn refine_affine_py<'py>(
         iterations,
         min_zncc,
         move_points,
+        try_identity,
     };
     let r = py
         .detach(|| refine_affine(&img_a, &img_b, &rows, &options))

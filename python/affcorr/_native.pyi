@@ -294,6 +294,7 @@ def refine_affine(
     iterations: int,
     min_zncc: float,
     move_points: bool,
+    try_identity: bool,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
     """Affine Lucas-Kanade refinement of ACs (wrapped by affcorr.refine_affine): (corrs (N, 8),
     refined (N,) bool, zncc (N,))."""

@@ -254,6 +254,7 @@ def refine_affine(
     iterations: int = 6,
     min_zncc: float = 0.8,
     move_points: bool = True,
+    try_identity: bool = True,
 ) -> AffineRefinement:
     """Refine ACs ``(N, 8)`` against the two images by affine Lucas-Kanade (Rust, parallel,
     the GIL released).
@@ -263,10 +264,12 @@ def refine_affine(
     over Gaussian blurs ``blur_sigmas`` (px), at most ``iterations`` steps per level. A result
     is kept when det A > 0, ``|t| < radius / 2`` and its ZNCC both beats the input's and
     reaches ``min_zncc``; otherwise the input row is returned. With ``move_points`` x2 becomes
-    ``x2 + t`` (A and t are fitted together); otherwise only A changes.
+    ``x2 + t`` (A and t are fitted together); otherwise only A changes. With ``try_identity``
+    the iterations start from A = I instead of the input's A wherever the identity matches
+    better at the coarsest level (most image pairs are roughly upright).
 
-    On graffiti 1->3 at SIFT's correct matches the median ||A - A_gt||_F goes from 0.37 (the
-    shape network) to about 0.03 (benches/results/affine_refine.md).
+    On graffiti 1->3 at SIFT's correct matches the median ||A - A_gt||_F goes from 0.369 (the
+    shape network) to 0.023, against SIFT's own 0.311 (benches/results/shape_accuracy.md).
 
     >>> import numpy as np, affcorr
     >>> y, x = np.mgrid[:120, :120]
@@ -295,5 +298,6 @@ def refine_affine(
         iterations=iterations,
         min_zncc=float(min_zncc),
         move_points=bool(move_points),
+        try_identity=bool(try_identity),
     )
     return AffineRefinement(out, refined, zncc)
