@@ -108,6 +108,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--matchers", nargs="+", default=["xfeat-lighterglue", "xfeat", "xfeat-star"])
     ap.add_argument("--out", type=Path, default=ROOT / "benches/results/pipeline_vs_sift")
     ap.add_argument("--build", default="", help="a note on the affcorr build, for the table")
+    ap.add_argument(
+        "--with-refinement",
+        action="store_true",
+        help="also each matcher with Pipeline(refine_affine=True) (affine Lucas-Kanade ACs)",
+    )
     args = ap.parse_args(argv)
 
     import affcorr
@@ -161,8 +166,11 @@ def main(argv: list[str] | None = None) -> int:
         }
     )
 
-    for matcher in args.matchers:
-        pipe = affcorr.Pipeline(matcher, threads=args.threads)
+    variants = [(m, False) for m in args.matchers]
+    if args.with_refinement:
+        variants += [(m, True) for m in args.matchers]
+    for matcher, refine in variants:
+        pipe = affcorr.Pipeline(matcher, threads=args.threads, refine_affine=refine)
         res = pipe.match_pair(a, b)
         correct = int(correct_mask(res.corrs, H_gt, 3.0).sum())
         # The ACs (2-AC minimal samples, the default), and their points alone (4-point samples).
@@ -180,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
                 inl.append(info.num_inliers)
             rows.append(
                 {
-                    "method": f"affcorr {matcher} ({label})",
+                    "method": f"affcorr {matcher}{' + LK' if refine else ''} ({label})",
                     "threshold_px": thr,
                     "matches": len(res),
                     "correct_3px": correct,
