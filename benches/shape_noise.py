@@ -24,18 +24,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "python"))
 
 import affcorr  # noqa: E402
-from affcorr.data import data_dir, read_opencv_matrix  # noqa: E402
+from affcorr.data import graffiti_grid  # noqa: E402
 from affcorr.metrics import affine_errors  # noqa: E402
 
 
 def grid_ground_truth() -> tuple[Path, Path, np.ndarray]:
-    d = data_dir() / "graffiti"
-    H = read_opencv_matrix(d / "H1to3p.xml")
-    ys, xs = np.mgrid[60:580:10, 60:740:10]
-    x1 = np.c_[xs.ravel(), ys.ravel()].astype(np.float64)
-    gt = affcorr.correspondences_from_homography(H, x1)
-    inside = (gt[:, 2] > 40) & (gt[:, 3] > 40) & (gt[:, 2] < 760) & (gt[:, 3] < 600)
-    return d / "graf1.png", d / "graf3.png", gt[inside]
+    return graffiti_grid(step=10)
 
 
 def main(argv=None) -> None:

@@ -11,7 +11,7 @@ from __future__ import annotations
 import affcorr
 import numpy as np
 import pytest
-from affcorr.data import data_dir, read_opencv_matrix
+from affcorr.data import graffiti_grid
 from affcorr.metrics import affine_errors
 
 # Graffiti grid, x2 + N(0, 2^2) px, network then LK (measured): 81% refined; median
@@ -95,17 +95,23 @@ def test_empty_input():
 
 @pytest.fixture(scope="module")
 def graffiti_noisy():
-    d = data_dir() / "graffiti"
-    H = read_opencv_matrix(d / "H1to3p.xml")
-    ys, xs = np.mgrid[60:580:20, 60:740:20]
-    x1 = np.c_[xs.ravel(), ys.ravel()].astype(np.float64)
-    gt = affcorr.correspondences_from_homography(H, x1)
-    keep = (gt[:, 2] > 40) & (gt[:, 3] > 40) & (gt[:, 2] < 760) & (gt[:, 3] < 600)
-    gt = gt[keep]
-    a, b = str(d / "graf1.png"), str(d / "graf3.png")
+    a, b, gt = graffiti_grid()
+    a, b = str(a), str(b)
     x2 = gt[:, 2:4] + np.random.default_rng(0).normal(0.0, 2.0, (len(gt), 2))
     est = affcorr.ShapeEstimator()
     return gt, a, b, est, est.estimate(a, b, gt[:, :2], x2)
+
+
+def test_graffiti_grid_is_the_homography():
+    a, b, gt = graffiti_grid(step=40)
+    H = affcorr.data.read_opencv_matrix(a.parent / "H1to3p.xml")
+    p = np.c_[gt[:, :2], np.ones(len(gt))] @ H.T
+    np.testing.assert_allclose(gt[:, 2:4], p[:, :2] / p[:, 2:], atol=1e-9)
+    np.testing.assert_allclose(
+        gt[:, 4:], affcorr.affine_from_homography(H, gt[:, :2]).reshape(-1, 4), atol=1e-12
+    )
+    assert len(gt) > 100 and a.exists() and b.exists()
+    assert (gt[:, 2:4] > 40).all() and (gt[:, 2] < 760).all() and (gt[:, 3] < 600).all()
 
 
 def test_graffiti_refinement_accuracy(graffiti_noisy):

@@ -11,7 +11,7 @@ from __future__ import annotations
 import affcorr
 import numpy as np
 import pytest
-from affcorr.data import data_dir, read_opencv_matrix
+from affcorr.data import data_dir, graffiti_grid
 from affcorr.metrics import affine_errors
 
 # Measured with the shipped model: median 0.390, mean cosine 0.774, inverse product 0.086; with
@@ -24,16 +24,8 @@ NOISY_MEAN_COS_BOUND = 0.60
 
 @pytest.fixture(scope="module")
 def graffiti_acs():
-    d = data_dir() / "graffiti"
-    H = read_opencv_matrix(d / "H1to3p.xml")
-    ys, xs = np.mgrid[60:580:20, 60:740:20]
-    x1 = np.c_[xs.ravel(), ys.ravel()].astype(np.float64)
-    gt = affcorr.correspondences_from_homography(H, x1)
-    keep = (gt[:, 2] > 40) & (gt[:, 3] > 40) & (gt[:, 2] < 760) & (gt[:, 3] < 600)
-    gt = gt[keep]
-    est = affcorr.ShapeEstimator().estimate(
-        str(d / "graf1.png"), str(d / "graf3.png"), gt[:, :2], gt[:, 2:4]
-    )
+    a, b, gt = graffiti_grid()
+    est = affcorr.ShapeEstimator().estimate(str(a), str(b), gt[:, :2], gt[:, 2:4])
     return gt, est
 
 

@@ -48,3 +48,21 @@ def graffiti() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         read_gray(d / "graf3.png"),
         read_opencv_matrix(d / "H1to3p.xml"),
     )
+
+
+def graffiti_grid(step: int = 20) -> tuple[Path, Path, np.ndarray]:
+    """(image 1 path, image 3 path, ground-truth ACs (N, 8)) of graffiti 1→3 on a grid.
+
+    x1 runs over a ``step``-pixel grid of image 1 (60..580 × 60..740 px); x2 and A come from
+    H1to3p (``affcorr.correspondences_from_homography``); points whose x2 falls within 40 px of
+    image 3's border are dropped. The exact ground truth the shape tests and benches use.
+    """
+    from . import _native
+
+    d = data_dir() / "graffiti"
+    H = read_opencv_matrix(d / "H1to3p.xml")
+    ys, xs = np.mgrid[60:580:step, 60:740:step]
+    x1 = np.c_[xs.ravel(), ys.ravel()].astype(np.float64)
+    gt = _native.correspondences_from_homography(H, x1)
+    inside = (gt[:, 2] > 40) & (gt[:, 3] > 40) & (gt[:, 2] < 760) & (gt[:, 3] < 600)
+    return d / "graf1.png", d / "graf3.png", gt[inside]
