@@ -274,8 +274,9 @@ struct Window {
     centred: Vec<f64>,
     /// w·SD⊥ per grid pixel.
     sd: Vec<[f64; 6]>,
-    /// ‖T − T̄‖²_w and Σ w.
+    /// ‖T − T̄‖²_w.
     norm_sq: f64,
+    /// Σ w.
     weight: f64,
 }
 
