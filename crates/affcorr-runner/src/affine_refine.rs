@@ -232,12 +232,39 @@ impl<const C: usize> Plane<C> {
             (1.0 - fy) * top + fy * bottom
         })
     }
+
+    /// [`Plane::sample`] for a point known to lie in [0, W − 2] × [0, H − 2], where no read
+    /// needs clamping (the same arithmetic, so the same values).
+    #[inline(always)]
+    fn sample_inside(&self, x: f64, y: f64) -> [f64; C] {
+        let (xf, yf) = (x.floor(), y.floor());
+        let (fx, fy) = (x - xf, y - yf);
+        let i = yf as usize * self.width + xf as usize;
+        let (p00, p01) = (self.data[i], self.data[i + 1]);
+        let (p10, p11) = (self.data[i + self.width], self.data[i + self.width + 1]);
+        std::array::from_fn(|k| {
+            let top = (1.0 - fx) * p00[k] as f64 + fx * p01[k] as f64;
+            let bottom = (1.0 - fx) * p10[k] as f64 + fx * p11[k] as f64;
+            (1.0 - fy) * top + fy * bottom
+        })
+    }
+
+    /// Whether the window `origin + A·[−r, r]²` lies inside [0, W − 2] × [0, H − 2].
+    fn contains(&self, origin: [f64; 2], a: &[f64; 4], r: f64) -> bool {
+        let (ex, ey) = ((a[0].abs() + a[1].abs()) * r, (a[2].abs() + a[3].abs()) * r);
+        origin[0] - ex >= 0.0
+            && origin[1] - ey >= 0.0
+            && origin[0] + ex <= (self.width as f64 - 2.0)
+            && origin[1] + ey <= (self.height as f64 - 2.0)
+    }
 }
 
 /// One level of the pyramid: image A with its gradient (the template side), image B.
 struct Level {
     a: Plane<3>,
     b: Plane<1>,
+    /// R: the grid's offsets lie in [−R, R]².
+    radius: f64,
     /// The window's offsets and weights at this level's stride.
     grid: Vec<([f64; 2], f64)>,
 }
@@ -262,6 +289,7 @@ impl Level {
         Self {
             a: Plane::new(image_a, sigma),
             b: Plane::new(image_b, sigma),
+            radius: radius as f64,
             grid,
         }
     }
@@ -292,8 +320,14 @@ impl Window {
         self.centred.clear();
         self.sd.clear();
         let (mut sw, mut st) = (0.0, 0.0);
+        let inside = level.a.contains(x1, &[1.0, 0.0, 0.0, 1.0], level.radius);
         for (d, w) in &level.grid {
-            let [t, tx, ty] = level.a.sample(x1[0] + d[0], x1[1] + d[1]);
+            let (x, y) = (x1[0] + d[0], x1[1] + d[1]);
+            let [t, tx, ty] = if inside {
+                level.a.sample_inside(x, y)
+            } else {
+                level.a.sample(x, y)
+            };
             sw += w;
             st += w * t;
             self.centred.push(t);
@@ -348,10 +382,27 @@ impl Window {
         origin: [f64; 2],
         a: &[f64; 4],
     ) -> ([f64; 6], f64, f64, f64) {
+        // The loop twice, so that the common case (the window inside image B) reads without
+        // clamping.
+        if level.b.contains(origin, a, level.radius) {
+            self.accumulate(level, origin, a, |u, v| level.b.sample_inside(u, v)[0])
+        } else {
+            self.accumulate(level, origin, a, |u, v| level.b.sample(u, v)[0])
+        }
+    }
+
+    #[inline(always)]
+    fn accumulate(
+        &self,
+        level: &Level,
+        origin: [f64; 2],
+        a: &[f64; 4],
+        sample: impl Fn(f64, f64) -> f64,
+    ) -> ([f64; 6], f64, f64, f64) {
         let (mut sdg, mut tg, mut sg, mut gg) = ([0.0; 6], 0.0, 0.0, 0.0);
         for (((d, w), sd), c) in level.grid.iter().zip(&self.sd).zip(&self.centred) {
             let (u, v) = warp(origin, a, d);
-            let [g] = level.b.sample(u, v);
+            let g = sample(u, v);
             for k in 0..6 {
                 sdg[k] += sd[k] * g;
             }
@@ -747,6 +798,22 @@ mod tests {
             },
             "min_zncc",
         );
+    }
+
+    #[test]
+    fn unclamped_reads_equal_clamped_ones_inside() {
+        let plane = Plane::<3>::new(&texture(30, 20, 2), 1.0);
+        for k in 0..500 {
+            let (x, y) = (
+                (k * 37 % 2800) as f64 / 100.0,
+                (k * 53 % 1800) as f64 / 100.0,
+            );
+            assert_eq!(plane.sample(x, y), plane.sample_inside(x, y), "({x}, {y})");
+        }
+        let a = [1.2, 0.3, -0.1, 0.8];
+        assert!(plane.contains([14.0, 9.0], &a, 5.0));
+        assert!(!plane.contains([14.0, 9.0], &a, 10.0));
+        assert!(!plane.contains([28.5, 9.0], &[1.0, 0.0, 0.0, 1.0], 0.1));
     }
 
     #[test]
