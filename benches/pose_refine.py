@@ -1,6 +1,7 @@
 """Relative pose with and without the affine refinement of the ACs, on the same pairs.
 
     .venv/bin/python benches/pose_refine.py [--synthetic 60] [--matcher xfeat-lighterglue]
+        [--shape-model PATH] [--out benches/results/pose_refine.md]
 
 Pairs: evaluation experiment 3's data (benches/eval/pose_data.py): the first ``--synthetic``
 rendered multi-plane pairs, the opencv-doc chessboard pairs (when benches/eval/pose_setup.sh
@@ -60,10 +61,11 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--synthetic", type=int, default=60)
     ap.add_argument("--matcher", default="xfeat-lighterglue")
+    ap.add_argument("--shape-model", default=None, help="shape network (default: the bundled)")
     ap.add_argument("--out", type=Path, default=ROOT / "benches/results/pose_refine.md")
     args = ap.parse_args(argv)
     t0 = time.time()
-    pipe = affcorr.Pipeline(args.matcher, threads=2)
+    pipe = affcorr.Pipeline(args.matcher, threads=2, shape_model=args.shape_model)
     rows = {"network": [], "network + LK": []}
     by_set = {}
     refine_s, refined_share = [], []
@@ -94,7 +96,8 @@ def main(argv=None) -> None:
         f"Command: `.venv/bin/python benches/pose_refine.py {' '.join(argv or sys.argv[1:])}`"
         f" ({time.time() - t0:.0f} s; {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}).",
         "",
-        f"Matcher {args.matcher} (affcorr.Pipeline, 2 threads); estimate_relative_pose with "
+        f"Matcher {args.matcher} (affcorr.Pipeline, 2 threads), shape network "
+        f"{args.shape_model or 'bundled'}; estimate_relative_pose with "
         f"2-AC samples and defaults at {THRESHOLD} px; pose error = max(rotation, translation "
         "direction), a failure counts as infinite. Refinement: affcorr.refine_affine with its "
         f"defaults, median {1e3 * np.median(refine_s):.0f} ms per pair, "
