@@ -50,6 +50,19 @@ def test_match_show_and_homography(graf, tmp_path, capsys):
     assert err < 3.0  # measured 1.0-1.6 px; documented bound
 
 
+def test_match_with_refinement(graf, tmp_path):
+    """--refine-affine gives refine_affine's ACs of the plain match."""
+    import affcorr
+
+    a, b, _ = graf
+    plain, refined = tmp_path / "plain.npz", tmp_path / "refined.npz"
+    common = ["--matcher", "xfeat", "--max-keypoints", "512", "--threads", "2"]
+    assert cli.main(["match", a, b, "-o", str(plain), *common]) == 0
+    assert cli.main(["match", a, b, "-o", str(refined), *common, "--refine-affine"]) == 0
+    expected = affcorr.refine_affine(a, b, np.load(plain)["corrs"]).corrs
+    np.testing.assert_array_equal(np.load(refined)["corrs"], expected)
+
+
 def test_bad_inputs_exit_2_with_a_message(graf, tmp_path, capsys):
     a, b, _ = graf
     assert cli.main(["pose", a, b, "--K1", "1,2", "--K2", "1,2,3,4"]) == 2

@@ -72,6 +72,7 @@ def _pipeline(args):
         threads=args.threads,
         dense_model=args.dense_model,
         shape_model=args.shape_model,
+        refine_affine=args.refine_affine,
     )
 
 
@@ -98,6 +99,11 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
         help="resize so that the longer side is at most this (px)",
     )
     p.add_argument("--threads", type=int, default=None, help="default: all cores")
+    p.add_argument(
+        "--refine-affine",
+        action="store_true",
+        help="refine the ACs against the images by affine Lucas-Kanade (affcorr.refine_affine)",
+    )
 
 
 def _print_timings(timings: dict) -> None:
