@@ -465,20 +465,6 @@ fn refine_one(
     let x2 = [c[2], c[3]];
     let a0 = [c[4], c[5], c[6], c[7]];
     let (mut a, mut t) = (Matrix2::new(a0[0], a0[1], a0[2], a0[3]), [0.0, 0.0]);
-    if options.try_identity
-        && let Some(first) = levels.first()
-        && window.prepare(first, x1).is_some()
-    {
-        // Start from A = I instead when it matches better at the coarsest level.
-        let z = |m: &[f64; 4]| {
-            let (_, tg, sg, gg) = window.correlate(first, x2, m);
-            window.zncc(tg, sg, gg)
-        };
-        let identity = [1.0, 0.0, 0.0, 1.0];
-        if z(&identity) > z(&a0) {
-            a = Matrix2::identity();
-        }
-    }
     let radius = options.radius as f64;
     let mut flat = false;
     for (l, level) in levels.iter().enumerate() {
@@ -486,6 +472,16 @@ fn refine_one(
             flat = l + 1 == levels.len();
             continue;
         };
+        if l == 0 && options.try_identity {
+            // Start from A = I instead when it matches better at the coarsest level.
+            let z = |m: &[f64; 4]| {
+                let (_, tg, sg, gg) = window.correlate(level, x2, m);
+                window.zncc(tg, sg, gg)
+            };
+            if z(&[1.0, 0.0, 0.0, 1.0]) > z(&a0) {
+                a = Matrix2::identity();
+            }
+        }
         // The best-matching warp of this level so far, its ZNCC and the step planned from it.
         let mut best: Option<(Matrix2<f64>, [f64; 2], f64, Vec6)> = None;
         let (mut a_try, mut t_try, mut scale) = (a, t, 1.0);
@@ -530,11 +526,12 @@ fn refine_one(
             (a, t) = (a_best, t_best);
         }
     }
-    // Judged at the finest level: the input, then the result.
-    let finest = levels.last().expect("at least one level");
-    if flat || window.prepare(finest, x1).is_none() {
+    // Judged at the finest level, which the window still holds from the last pass of the
+    // loop: the input, then the result.
+    if flat {
         return (false, *c, f64::NAN);
     }
+    let finest = levels.last().expect("at least one level");
     let (_, tg, sg, gg) = window.correlate(finest, x2, &a0);
     let z_in = window.zncc(tg, sg, gg);
     let a_out = row_major(&a);
@@ -545,7 +542,7 @@ fn refine_one(
     };
     let plausible = a_out.iter().chain(&t).all(|v| v.is_finite())
         && a.determinant() > 0.0
-        && t[0].abs().max(t[1].abs()) < options.radius as f64 / 2.0;
+        && t[0].abs().max(t[1].abs()) < radius / 2.0;
     if plausible {
         // The ZNCC of what is returned: with fixed points, A is judged at x2.
         let (_, tg, sg, gg) = window.correlate(finest, x2_out, &a_out);
