@@ -259,7 +259,10 @@ impl ShapeRunner {
         Ok(out)
     }
 
-    /// `(corrs (N, 8), orientation_a, orientation_b, scale_a, scale_b, residual_shape (N, 3))`.
+    /// `(corrs (N, 8), orientation_a, orientation_b, scale_a, scale_b, residual_shape (N, 3))`;
+    /// with `refine`, the corrs refined by `refine_affine` (default options) on the same
+    /// decoded images.
+    #[pyo3(signature = (image_a, image_b, x1, x2, refine = false))]
     #[allow(clippy::type_complexity)]
     fn estimate<'py>(
         &self,
@@ -268,6 +271,7 @@ impl ShapeRunner {
         image_b: &Bound<'py, PyAny>,
         x1: &Bound<'py, PyAny>,
         x2: &Bound<'py, PyAny>,
+        refine: bool,
     ) -> PyResult<(F64<'py>, F64<'py>, F64<'py>, F64<'py>, F64<'py>, F64<'py>)> {
         let x1 = points(x1, "x1")?;
         let x2 = points(x2, "x2")?;
@@ -281,7 +285,14 @@ impl ShapeRunner {
         let img_a = gray_image(py, image_a, "image_a")?;
         let img_b = gray_image(py, image_b, "image_b")?;
         let e = py
-            .detach(|| self.inner.estimate(&img_a, &img_b, &x1, &x2))
+            .detach(|| {
+                let mut e = self.inner.estimate(&img_a, &img_b, &x1, &x2)?;
+                if refine {
+                    let options = AffineRefineOptions::default();
+                    e.corrs = refine_affine(&img_a, &img_b, &e.corrs, &options)?.corrs;
+                }
+                Ok(e)
+            })
             .map_err(|e| py_error(e, None))?;
         let n = e.corrs.len();
         Ok((

@@ -246,7 +246,7 @@ class ShapeRunner:
         with return_logits also the float32 outputs angle_logits_a/b, scale_logits_a/b and
         residual_shape_raw."""
     def estimate(
-        self, image_a: Any, image_b: Any, x1: ArrayLike, x2: ArrayLike
+        self, image_a: Any, image_b: Any, x1: ArrayLike, x2: ArrayLike, refine: bool = False
     ) -> tuple[
         NDArray[np.float64],
         NDArray[np.float64],

@@ -178,10 +178,7 @@ class ShapeEstimator:
         Lucas-Kanade (:func:`refine_affine` with its defaults, which also moves ``x2``); use
         :func:`refine_affine` directly for its options and per-AC report.
         """
-        corrs = self._runner.estimate(image_a, image_b, x1, x2)[0]
-        if refine:
-            corrs = refine_affine(image_a, image_b, corrs).corrs
-        return corrs
+        return self._runner.estimate(image_a, image_b, x1, x2, bool(refine))[0]
 
     def estimate_detailed(
         self, image_a: ImageLike, image_b: ImageLike, x1: ArrayLike, x2: ArrayLike
