@@ -16,6 +16,7 @@ from affcorr.train import views  # noqa: E402
 from affcorr.train.shape import shift_distribution  # noqa: E402
 from affcorr.train.shape_net import (  # noqa: E402
     ANGLE_BINS,
+    ARCHITECTURES,
     SCALE_BINS,
     ShapeNet,
     angle_bin_centres,
@@ -148,19 +149,21 @@ def test_synthesize_torch_matches_rust():
     np.testing.assert_allclose(got.numpy(), affcorr.synthesize_affine(o, s, r), atol=1e-12)
 
 
-def test_onnx_export_contract_and_parity(tmp_path):
+@pytest.mark.parametrize("arch", list(ARCHITECTURES))
+def test_onnx_export_contract_and_parity(tmp_path, arch):
     pytest.importorskip("onnx")
     ort = pytest.importorskip("onnxruntime")
     from affcorr.train.export import OUTPUT_NAMES, export
 
     torch.manual_seed(0)
-    net = ShapeNet().eval()
-    path = export(net, tmp_path / "shape.onnx")
+    net = ShapeNet(arch).eval()
+    path = export(net, tmp_path / "shape.onnx", {"architecture": arch})
     sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
     assert [i.name for i in sess.get_inputs()] == ["patch_a", "patch_b"]
     assert [o.name for o in sess.get_outputs()] == OUTPUT_NAMES
     meta = sess.get_modelmeta().custom_metadata_map
     assert meta["affcorr.contract"] == "shape-v1" and meta["decode"] == "softmax-mean"
+    assert meta["architecture"] == arch
     np.testing.assert_allclose(json.loads(meta["angle_bins"]), angle_bin_centres().numpy())
     np.testing.assert_allclose(json.loads(meta["scale_bins"]), scale_bin_centres().numpy())
     rng = np.random.default_rng(5)
@@ -172,3 +175,29 @@ def test_onnx_export_contract_and_parity(tmp_path):
     for g, w in zip(got, want):
         np.testing.assert_allclose(g, w.numpy(), atol=2e-4)
     assert got[4].shape == (7, 3) and np.all(got[4][:, [0, 2]] > -1)
+
+
+def test_checkpoints_record_their_architecture(tmp_path):
+    from affcorr.train.export import load_trained
+    from affcorr.train.shape import _load, _save, checkpoint_architecture
+
+    torch.manual_seed(1)
+    net = ShapeNet("fast")
+    for key, m, file in (("os", net.os, "os.pt"), ("aff", net.aff, "aff_both.pt")):
+        _save(tmp_path / file, {key: m}, torch.optim.SGD(m.parameters(), lr=0.1), 3)
+    assert checkpoint_architecture(tmp_path / "os.pt") == "fast"
+    assert checkpoint_architecture(tmp_path / "missing.pt") is None
+    loaded = load_trained(tmp_path, "both")
+    assert loaded.arch.name == "fast"
+    x = torch.rand(3, 1, 32, 32)
+    with torch.no_grad():
+        for g, w in zip(loaded(x, x.flip(-1)), net.eval()(x, x.flip(-1))):
+            torch.testing.assert_close(g, w)
+    # Loading into another architecture names the one the file holds.
+    with pytest.raises(SystemExit, match="holds a 'fast' network, not 'v1': pass --arch fast"):
+        _load(tmp_path / "os.pt", {"os": ShapeNet("v1").os}, None)
+
+
+def test_unknown_architecture_is_named():
+    with pytest.raises(ValueError, match="architecture: unknown 'huge'; known: v1, fast"):
+        ShapeNet("huge")

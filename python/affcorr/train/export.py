@@ -20,8 +20,15 @@ from pathlib import Path
 
 import torch
 
-from .shape import _load
-from .shape_net import PATCH_SIZE, ShapeNet, angle_bin_centres, scale_bin_centres
+from .shape import _load, checkpoint_architecture
+from .shape_net import (
+    ARCHITECTURES,
+    DEFAULT_ARCHITECTURE,
+    PATCH_SIZE,
+    ShapeNet,
+    angle_bin_centres,
+    scale_bin_centres,
+)
 
 CONTRACT = "shape-v1"
 OUTPUT_NAMES = [
@@ -72,9 +79,13 @@ def export(net: ShapeNet, out: Path, extra_metadata: dict[str, str] | None = Non
     return out
 
 
-def load_trained(workdir: Path, loss: str, width: int = 8, hidden: int = 128) -> ShapeNet:
-    """E_os from ``workdir/os.pt`` and E_aff from ``workdir/aff_<loss>.pt`` in one module."""
-    net = ShapeNet(width, hidden)
+def load_trained(workdir: Path, loss: str) -> ShapeNet:
+    """E_os from ``workdir/os.pt`` and E_aff from ``workdir/aff_<loss>.pt`` in one module, in
+    the architecture the checkpoints record."""
+    arch = checkpoint_architecture(workdir / "os.pt")
+    if arch is None:
+        raise SystemExit(f"{workdir / 'os.pt'} is missing: train the 'os' stage first")
+    net = ShapeNet(arch)
     if _load(workdir / "os.pt", {"os": net.os}, None) == 0:
         raise SystemExit(f"{workdir / 'os.pt'} is missing: train the 'os' stage first")
     if loss != "none" and _load(workdir / f"aff_{loss}.pt", {"aff": net.aff}, None) == 0:
@@ -97,12 +108,20 @@ def main(argv=None) -> None:
     )
     p.add_argument("-o", "--output", type=Path, required=True)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--arch",
+        choices=list(ARCHITECTURES),
+        default=DEFAULT_ARCHITECTURE,
+        help="architecture of the untrained network (without --workdir)",
+    )
     args = p.parse_args(argv)
     if args.workdir is None:
         torch.manual_seed(args.seed)
-        net, extra = ShapeNet().eval(), {"trained": "no (random weights, for tests)"}
+        net, extra = ShapeNet(args.arch).eval(), {"trained": "no (random weights, for tests)"}
     else:
-        net, extra = load_trained(args.workdir, args.loss), {"trained": f"E_aff loss {args.loss}"}
+        net = load_trained(args.workdir, args.loss)
+        extra = {"trained": f"E_aff loss {args.loss}"}
+    extra["architecture"] = net.arch.name
     print(f"wrote {export(net, args.output, extra)}")
 
 

@@ -32,13 +32,15 @@ import torch
 from .datasets import plane_dataset, similarity_dataset
 from .shape_net import (
     ANGLE_BINS,
+    ARCHITECTURES,
+    DEFAULT_ARCHITECTURE,
     LOG2_SCALE_RANGE,
     SCALE_BINS,
     OrientationScaleNet,
     ResidualShapeNet,
     decode_orientation,
     decode_scale,
-    similarity_to_frame_a,
+    normalise_patches,
     synthesize_torch,
 )
 
@@ -113,11 +115,22 @@ def os_errors(net: OrientationScaleNet, data: dict, batch: int = 2048) -> dict[s
     }
 
 
+def checkpoint_architecture(path: Path) -> str | None:
+    """The architecture a checkpoint was trained with (``None``: no checkpoint); checkpoints
+    from before architectures were recorded are ``v1``."""
+    if not path.exists():
+        return None
+    return torch.load(path, map_location="cpu").get("arch", "v1")
+
+
 def _load(path: Path, modules: dict, optimiser) -> int:
     if not path.exists():
         return 0
     state = torch.load(path, map_location="cpu")
     for name, m in modules.items():
+        want, have = state.get("arch", "v1"), m.arch.name
+        if want != have:
+            raise SystemExit(f"{path} holds a {want!r} network, not {have!r}: pass --arch {want}")
         m.load_state_dict(state[name])
     if optimiser is not None and "optimiser" in state:
         optimiser.load_state_dict(state["optimiser"])
@@ -126,7 +139,8 @@ def _load(path: Path, modules: dict, optimiser) -> int:
 
 def _save(path: Path, modules: dict, optimiser, step: int) -> None:
     state = {name: m.state_dict() for name, m in modules.items()}
-    state.update(optimiser=optimiser.state_dict(), step=step)
+    (arch,) = {m.arch.name for m in modules.values()}
+    state.update(optimiser=optimiser.state_dict(), step=step, arch=arch)
     tmp = path.with_suffix(".tmp")
     torch.save(state, tmp)
     tmp.replace(path)
@@ -159,7 +173,7 @@ def train_os(args) -> None:
     val = similarity_dataset(wd / "similarity_val.npz", "val", args.seed, centre_jitter=jit)
     print(f"E_os: {len(train['angle'])} training pairs, {len(val['angle'])} validation pairs")
     torch.manual_seed(args.seed)
-    net = OrientationScaleNet(args.width, args.hidden)
+    net = OrientationScaleNet(args.arch)
     opt = torch.optim.AdamW(net.parameters(), lr=args.lr, weight_decay=1e-4)
     ckpt = wd / "os.pt"
     step = _load(ckpt, {"os": net}, opt)
@@ -195,12 +209,12 @@ def train_os(args) -> None:
 
 def _affine_prediction(os_net, aff_net, pa, pb):
     with torch.no_grad():
-        aa, sa = os_net(pa)
-        ab, sb = os_net(pb)
+        na, nb = normalise_patches(pa), normalise_patches(pb)
+        aa, sa = os_net.logits(na)
+        ab, sb = os_net.logits(nb)
         o = decode_orientation(ab) - decode_orientation(aa)
         s = decode_scale(sb) / decode_scale(sa)
-        pb_in_a = similarity_to_frame_a(pb, torch.cos(o), torch.sin(o), s)
-    residual = aff_net(pa, pb_in_a)
+    residual = aff_net(na, nb, torch.cos(o), torch.sin(o), s)
     return synthesize_torch(o.double(), s.double(), residual.double()), o, s
 
 
@@ -249,12 +263,12 @@ def train_aff(args) -> None:
         f"E_aff ({args.loss}): {len(train['corrs'])} training pairs, "
         f"{len(val['corrs'])} validation pairs"
     )
-    os_net = OrientationScaleNet(args.width, args.hidden)
+    os_net = OrientationScaleNet(checkpoint_architecture(wd / "os.pt") or args.arch)
     if _load(wd / "os.pt", {"os": os_net}, None) == 0:
         raise SystemExit(f"no trained E_os in {wd}: run the 'os' stage first")
     os_net.eval()
     torch.manual_seed(args.seed)
-    aff_net = ResidualShapeNet(args.width, args.hidden)
+    aff_net = ResidualShapeNet(os_net.arch)
     opt = torch.optim.AdamW(aff_net.parameters(), lr=args.lr, weight_decay=1e-4)
     ckpt = wd / f"aff_{args.loss}.pt"
     step = _load(ckpt, {"aff": aff_net}, opt)
@@ -326,8 +340,12 @@ def main(argv=None) -> None:
         "has (default: 0 for os, 0.5 for aff); datasets are cached per workdir, so use a new "
         "workdir for a new value",
     )
-    p.add_argument("--width", type=int, default=8)
-    p.add_argument("--hidden", type=int, default=128)
+    p.add_argument(
+        "--arch",
+        choices=list(ARCHITECTURES),
+        default=DEFAULT_ARCHITECTURE,
+        help="layer plan (shape_net.ARCHITECTURES); the aff stage takes E_os's",
+    )
     p.add_argument("--save-every", type=int, default=500)
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--seed", type=int, default=0)

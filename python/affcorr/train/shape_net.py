@@ -23,6 +23,7 @@ feeds raw grayscale; illumination changes that are affine in intensity do not re
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F  # noqa: N812
@@ -64,24 +65,71 @@ def _conv(c_in: int, c_out: int, stride: int) -> nn.Sequential:
     )
 
 
-class Trunk(nn.Module):
-    """32x32 patches -> a feature vector: strided 3x3 convolutions down to 4x4, then a linear
-    layer. Small on purpose (about 0.5 MFLOP per patch): the runner's goal is >= 20k pairs/s on
-    two CPU cores."""
+@dataclass(frozen=True)
+class Architecture:
+    """The layer plan of both sub-networks; checkpoints record its ``name``.
 
-    def __init__(self, c_in: int, width: int, out: int) -> None:
+    ``os_layers`` / ``aff_layers``: (output channels, stride) per 3x3 convolution; both trunks
+    end at 4x4. ``aff_size``: E_aff sees both patches at this resolution (32, or 16 by 2x2
+    averaging over the same support). ``renormalise_b``: patch B is normalised again after its
+    resampling into A's frame (the zeros outside B shift its statistics).
+    """
+
+    name: str
+    os_layers: tuple[tuple[int, int], ...]
+    aff_layers: tuple[tuple[int, int], ...]
+    aff_size: int
+    renormalise_b: bool
+    hidden: int = 128
+
+
+ARCHITECTURES = {
+    # The first shipped model: six layers (width 8-16-32, every other one strided), full
+    # resolution throughout; 3.61 M multiply-adds per pair.
+    "v1": Architecture(
+        "v1",
+        os_layers=((8, 1), (8, 2), (16, 1), (16, 2), (32, 1), (32, 2)),
+        aff_layers=((8, 1), (8, 2), (16, 1), (16, 2), (32, 1), (32, 2)),
+        aff_size=32,
+        renormalise_b=True,
+    ),
+    # Chosen for speed in ONNX Runtime (benches/results/shape.md): a stride-2 stem, since
+    # full-resolution layers cost the most, few wide layers rather than more narrow ones, and
+    # E_aff at 16x16 (A'' is a low-frequency property of the pair); 1.59 M multiply-adds.
+    "fast": Architecture(
+        "fast",
+        os_layers=((8, 2), (16, 2), (32, 1), (32, 2)),
+        aff_layers=((16, 1), (16, 2), (32, 2)),
+        aff_size=16,
+        renormalise_b=False,
+    ),
+}
+DEFAULT_ARCHITECTURE = "v1"
+
+
+def architecture(name: str) -> Architecture:
+    """The preset called ``name``; a ValueError lists the known ones."""
+    try:
+        return ARCHITECTURES[name]
+    except KeyError:
+        raise ValueError(
+            f"architecture: unknown {name!r}; known: {', '.join(ARCHITECTURES)}"
+        ) from None
+
+
+class Trunk(nn.Module):
+    """Patches -> a feature vector: 3x3 convolutions (``layers``) down to 4x4, then a linear
+    layer."""
+
+    def __init__(self, c_in: int, layers: tuple[tuple[int, int], ...], out: int) -> None:
         super().__init__()
-        w = width
-        self.features = nn.Sequential(
-            _conv(c_in, w, 1),  # 32
-            _conv(w, w, 2),  # 16
-            _conv(w, 2 * w, 1),
-            _conv(2 * w, 2 * w, 2),  # 8
-            _conv(2 * w, 4 * w, 1),
-            _conv(4 * w, 4 * w, 2),  # 4
-        )
+        convs, c = [], c_in
+        for c_out, stride in layers:
+            convs.append(_conv(c, c_out, stride))
+            c = c_out
+        self.features = nn.Sequential(*convs)
         self.head = nn.Sequential(
-            nn.Flatten(), nn.Linear(4 * w * 16, out), nn.BatchNorm1d(out), nn.ReLU(inplace=True)
+            nn.Flatten(), nn.Linear(c * 16, out), nn.BatchNorm1d(out), nn.ReLU(inplace=True)
         )
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -91,30 +139,50 @@ class Trunk(nn.Module):
 class OrientationScaleNet(nn.Module):
     """E_os: one patch -> (angle logits, scale logits). Shared by both views."""
 
-    def __init__(self, width: int = 8, hidden: int = 128) -> None:
+    def __init__(self, arch: Architecture | str = DEFAULT_ARCHITECTURE) -> None:
         super().__init__()
-        self.trunk = Trunk(1, width, hidden)
-        self.angle = nn.Linear(hidden, ANGLE_BINS)
-        self.scale = nn.Linear(hidden, SCALE_BINS)
+        self.arch = architecture(arch) if isinstance(arch, str) else arch
+        self.trunk = Trunk(1, self.arch.os_layers, self.arch.hidden)
+        self.angle = nn.Linear(self.arch.hidden, ANGLE_BINS)
+        self.scale = nn.Linear(self.arch.hidden, SCALE_BINS)
+
+    def logits(self, normalised: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Logits of patches already passed through :func:`normalise_patches`."""
+        h = self.trunk(normalised)
+        return self.angle(h), self.scale(h)
 
     def forward(self, patch: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        h = self.trunk(normalise_patches(patch))
-        return self.angle(h), self.scale(h)
+        return self.logits(normalise_patches(patch))
 
 
 class ResidualShapeNet(nn.Module):
-    """E_aff: (patch A, patch B in A's frame) -> A'' = (x0, x1, x2)."""
+    """E_aff: (patch A, patch B in A's frame by E_os's similarity) -> A'' = (x0, x1, x2)."""
 
-    def __init__(self, width: int = 8, hidden: int = 128) -> None:
+    def __init__(self, arch: Architecture | str = DEFAULT_ARCHITECTURE) -> None:
         super().__init__()
-        self.trunk = Trunk(2, width, hidden)
-        self.out = nn.Linear(hidden, 3)
+        self.arch = architecture(arch) if isinstance(arch, str) else arch
+        self.trunk = Trunk(2, self.arch.aff_layers, self.arch.hidden)
+        self.out = nn.Linear(self.arch.hidden, 3)
         nn.init.zeros_(self.out.weight)
         nn.init.zeros_(self.out.bias)
 
-    def forward(self, patch_a: torch.Tensor, patch_b_in_a: torch.Tensor) -> torch.Tensor:
-        x = torch.cat([normalise_patches(patch_a), normalise_patches(patch_b_in_a)], dim=1)
-        u = self.out(self.trunk(x))
+    def forward(
+        self,
+        norm_a: torch.Tensor,
+        norm_b: torch.Tensor,
+        cos_o: torch.Tensor,
+        sin_o: torch.Tensor,
+        scale: torch.Tensor,
+    ) -> torch.Tensor:
+        """``norm_a``, ``norm_b``: normalised 32x32 patches; (cos O, sin O, S): the similarity
+        x2 = S R(O) x1 from E_os."""
+        factor = PATCH_SIZE // self.arch.aff_size
+        if factor > 1:
+            norm_a, norm_b = F.avg_pool2d(norm_a, factor), F.avg_pool2d(norm_b, factor)
+        b_in_a = similarity_to_frame_a(norm_b, cos_o, sin_o, scale)
+        if self.arch.renormalise_b:
+            b_in_a = normalise_patches(b_in_a)
+        u = self.out(self.trunk(torch.cat([norm_a, b_in_a], dim=1)))
         # 1 + x0 = exp(u0), 1 + x2 = exp(u2): always inside the det-normalisation's domain.
         return torch.stack([torch.exp(u[:, 0]) - 1.0, u[:, 1], torch.exp(u[:, 2]) - 1.0], dim=1)
 
@@ -147,38 +215,40 @@ def similarity_to_frame_a(
     """Resample patch B into patch A's frame under the similarity x2 = S R(O) x1.
 
     Pixel u of the output (offset from the centre) reads patch B at S R(O) u; both patches are
-    square, so the normalised grid coordinates transform by the same 2x2 matrix. Outside
-    patch B reads zero, i.e. the patch mean after normalisation.
+    square and of the same size, so the normalised grid coordinates transform by the same 2x2
+    matrix. Outside patch B reads zero (the patch mean, for a normalised patch).
     """
+    size = patch_b.shape[-1]
     c, s = (cos_o * scale).view(-1, 1, 1), (sin_o * scale).view(-1, 1, 1)
     # Normalised coordinates of the pixel centres (align_corners=False); affine_grid itself
     # does not export to ONNX.
-    u = (torch.arange(PATCH_SIZE, dtype=patch_b.dtype) + 0.5) * (2.0 / PATCH_SIZE) - 1.0
+    u = (torch.arange(size, dtype=patch_b.dtype) + 0.5) * (2.0 / size) - 1.0
     bx, by = u.view(1, 1, -1), u.view(1, -1, 1)
     grid = torch.stack([c * bx - s * by, s * bx + c * by], dim=-1)
-    b = normalise_patches(patch_b)
-    return F.grid_sample(b, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
+    return F.grid_sample(patch_b, grid, mode="bilinear", padding_mode="zeros", align_corners=False)
 
 
 class ShapeNet(nn.Module):
     """E_os + E_aff in the ONNX contract of DESIGN.md §6."""
 
-    def __init__(self, width: int = 8, hidden: int = 128) -> None:
+    def __init__(self, arch: Architecture | str = DEFAULT_ARCHITECTURE) -> None:
         super().__init__()
-        self.os = OrientationScaleNet(width, hidden)
-        self.aff = ResidualShapeNet(width, hidden)
+        self.arch = architecture(arch) if isinstance(arch, str) else arch
+        self.os = OrientationScaleNet(self.arch)
+        self.aff = ResidualShapeNet(self.arch)
 
     def forward(self, patch_a: torch.Tensor, patch_b: torch.Tensor):
-        n = patch_a.shape[0]
-        angle, scale = self.os(torch.cat([patch_a, patch_b], dim=0))
-        angle_a, angle_b = angle[:n], angle[n:]
-        scale_a, scale_b = scale[:n], scale[n:]
+        norm_a, norm_b = normalise_patches(patch_a), normalise_patches(patch_b)
+        # Two calls rather than one on the concatenated batch: the same convolutions without
+        # the copy.
+        angle_a, scale_a = self.os.logits(norm_a)
+        angle_b, scale_b = self.os.logits(norm_b)
         ca, sa = orientation_vector(angle_a)
         cb, sb = orientation_vector(angle_b)
         # cos and sin of O_B - O_A
         c, s = cb * ca + sb * sa, sb * ca - cb * sa
         scale = decode_scale(scale_b) / decode_scale(scale_a)
-        residual = self.aff(patch_a, similarity_to_frame_a(patch_b, c, s, scale))
+        residual = self.aff(norm_a, norm_b, c, s, scale)
         return angle_a, angle_b, scale_a, scale_b, residual
 
 
