@@ -15,12 +15,15 @@ use std::path::PathBuf;
 
 use crate::arrays::{Dim, F64Array, flatten, to_numpy};
 use affcorr::runner::{
-    AffineRefineOptions, GrayImage, Patches, PixelData, RunnerError, ShapeEstimator,
-    ShapeModelOptions, ShapeOutputs, extract_patches as extract, init_ort as init,
-    ort_library as loaded_library, refine_affine,
+    AffineRefineOptions, GrayImage, PixelData, RunnerError, ShapeEstimator, ShapeModelOptions,
+    ShapeOutputs, extract_patches as extract, init_ort as init, ort_library as loaded_library,
+    refine_affine,
 };
 use numpy::ndarray::{ArrayD, IxDyn};
-use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArrayDyn, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArray,
+    PyUntypedArrayMethods,
+};
 use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -138,28 +141,33 @@ fn points(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<[f64; 2]>>
 }
 
 /// Patches `(N, 1, 32, 32)`, any float dtype, finite.
-fn patches(py: Python<'_>, obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Patches> {
+/// `obj` as a C-contiguous float32 (N, 1, 32, 32) array of finite values, borrowed (no copy
+/// when it already is one).
+fn patches<'py>(
+    py: Python<'py>,
+    obj: &Bound<'py, PyAny>,
+    name: &str,
+) -> PyResult<PyReadonlyArrayDyn<'py, f32>> {
     let kwargs = PyDict::new(py);
     kwargs.set_item("dtype", "float32")?;
     let a = py
         .import("numpy")?
         .call_method("ascontiguousarray", (obj,), Some(&kwargs))
         .map_err(|e| PyValueError::new_err(format!("{name} must be a numeric array: {e}")))?;
-    let a = a.cast::<PyArrayDyn<f32>>()?.readonly();
+    let a = a.cast_into::<PyArrayDyn<f32>>()?.readonly();
     let shape = a.shape();
     if shape.len() != 4 || shape[1..] != PATCH_DIMS {
         return Err(PyValueError::new_err(format!(
             "{name} must have shape (N, 1, 32, 32), got {shape:?}"
         )));
     }
-    let data = a.as_slice()?;
-    if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+    if let Some(i) = a.as_slice()?.iter().position(|v| !v.is_finite()) {
         return Err(PyValueError::new_err(format!(
             "{name}[{}] contains NaN or infinity",
             i / PATCH_LEN
         )));
     }
-    Patches::from_vec(data.to_vec()).map_err(|e| py_error(e, Some(name)))
+    Ok(a)
 }
 
 fn f32_array<'py>(py: Python<'py>, shape: &[usize], data: Vec<f32>) -> PyResult<F32<'py>> {
@@ -213,17 +221,18 @@ impl ShapeRunner {
     ) -> PyResult<Bound<'py, PyDict>> {
         let a = patches(py, patches_a, "patches_a")?;
         let b = patches(py, patches_b, "patches_b")?;
-        if a.len() != b.len() {
+        if a.shape()[0] != b.shape()[0] {
             return Err(PyValueError::new_err(format!(
                 "patches_b has {} patches, but patches_a has {}",
-                b.len(),
-                a.len()
+                b.shape()[0],
+                a.shape()[0]
             )));
         }
         let model = self.inner.model();
+        let (a, b) = (a.as_slice()?, b.as_slice()?);
         let (raw, p) = py
             .detach(|| {
-                let raw = model.predict_raw(&a, &b)?;
+                let raw = model.predict_raw_slices(a, b)?;
                 let p = model.decode(&raw)?;
                 Ok((raw, p))
             })

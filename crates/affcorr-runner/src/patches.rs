@@ -81,11 +81,6 @@ impl Patches {
         &self.data[i * PATCH_LEN..(i + 1) * PATCH_LEN]
     }
 
-    /// Rows `start..end` as a slice.
-    pub(crate) fn rows(&self, start: usize, end: usize) -> &[f32] {
-        &self.data[start * PATCH_LEN..end * PATCH_LEN]
-    }
-
     /// The values, consuming the patches.
     pub fn into_vec(self) -> Vec<f32> {
         self.data

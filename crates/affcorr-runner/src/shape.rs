@@ -31,6 +31,7 @@ use std::sync::Mutex;
 
 use ort::session::Session;
 use ort::value::{TensorElementType, TensorRef, ValueType};
+use rayon::prelude::*;
 
 use crate::contract;
 use crate::error::{Result, RunnerError};
@@ -94,11 +95,8 @@ impl ShapeBins {
     /// `logits.len()` must be Kθ.
     pub fn decode_orientation(&self, logits: &[f32]) -> Option<f64> {
         assert_eq!(logits.len(), self.angles.len(), "angle logits width");
-        let (mut s, mut c) = (0.0, 0.0);
-        softmax_for_each(logits, |k, p| {
-            s += p * self.sin[k];
-            c += p * self.cos[k];
-        })?;
+        // atan2 is invariant to the common positive factor 1 / Σ exp, so it is not divided out.
+        let ([s, c], _) = softmax_weighted_sums(logits, [&self.sin, &self.cos])?;
         Some(s.atan2(c))
     }
 
@@ -106,9 +104,8 @@ impl ShapeBins {
     /// `logits.len()` must be Ks.
     pub fn decode_scale(&self, logits: &[f32]) -> Option<f64> {
         assert_eq!(logits.len(), self.scales.len(), "scale logits width");
-        let mut e = 0.0;
-        softmax_for_each(logits, |k, p| e += p * self.ln_scales[k])?;
-        Some(e.exp())
+        let ([e], sum) = softmax_weighted_sums(logits, [&self.ln_scales])?;
+        Some((e / sum).exp())
     }
 }
 
@@ -129,20 +126,29 @@ fn check_bins(
     }
 }
 
-/// Calls `f(k, p_k)` for the numerically stable softmax p of `logits`; `None` if any logit is
+/// (Σ_k e_k w_m[k] for each m, Σ_k e_k) with e_k = exp(l_k − max l): the softmax-weighted sums
+/// of `weights` before the division by Σ e. One exponential per logit, since decoding runs on every
+/// pair's Kθ + Ks logits twice and the exponentials are its whole cost. `None` if any logit is
 /// not finite.
-fn softmax_for_each(logits: &[f32], mut f: impl FnMut(usize, f64)) -> Option<()> {
+fn softmax_weighted_sums<const M: usize>(
+    logits: &[f32],
+    weights: [&[f64]; M],
+) -> Option<([f64; M], f64)> {
     if logits.iter().any(|v| !v.is_finite()) {
         return None;
     }
     let max = logits
         .iter()
         .fold(f64::NEG_INFINITY, |m, &v| m.max(v as f64));
-    let sum: f64 = logits.iter().map(|&v| (v as f64 - max).exp()).sum();
+    let (mut acc, mut sum) = ([0.0; M], 0.0);
     for (k, &v) in logits.iter().enumerate() {
-        f(k, (v as f64 - max).exp() / sum);
+        let e = (v as f64 - max).exp();
+        sum += e;
+        for (a, w) in acc.iter_mut().zip(&weights) {
+            *a += e * w[k];
+        }
     }
-    Some(())
+    Some((acc, sum))
 }
 
 /// Options of [`ShapeModel`].
@@ -326,11 +332,28 @@ impl ShapeModel {
 
     /// The raw network outputs for pairs of patches, run in batches of [`Self::batch_size`].
     pub fn predict_raw(&self, patch_a: &Patches, patch_b: &Patches) -> Result<ShapeOutputs> {
-        let n = patch_a.len();
-        if patch_b.len() != n {
+        self.predict_raw_slices(patch_a.as_slice(), patch_b.as_slice())
+    }
+
+    /// [`Self::predict_raw`] on borrowed `(N, 1, 32, 32)` row-major data, for callers that hold
+    /// patches in their own buffers (the Python bindings: numpy arrays, without a copy).
+    pub fn predict_raw_slices(&self, patch_a: &[f32], patch_b: &[f32]) -> Result<ShapeOutputs> {
+        for (name, data) in [("patch_a", patch_a), ("patch_b", patch_b)] {
+            if !data.len().is_multiple_of(PATCH_LEN) {
+                return Err(RunnerError::invalid(
+                    name,
+                    format!(
+                        "{} values is not a whole number of 32x32 patches",
+                        data.len()
+                    ),
+                ));
+            }
+        }
+        let n = patch_a.len() / PATCH_LEN;
+        if patch_b.len() / PATCH_LEN != n {
             return Err(RunnerError::invalid(
                 "patch_b",
-                format!("{} patches, but patch_a has {n}", patch_b.len()),
+                format!("{} patches, but patch_a has {n}", patch_b.len() / PATCH_LEN),
             ));
         }
         let widths = self.widths();
@@ -347,8 +370,8 @@ impl ShapeModel {
             let end = (start + self.batch_size).min(n);
             run_batch(
                 &mut session,
-                patch_a.rows(start, end),
-                patch_b.rows(start, end),
+                &patch_a[start * PATCH_LEN..end * PATCH_LEN],
+                &patch_b[start * PATCH_LEN..end * PATCH_LEN],
                 end - start,
                 &widths,
                 &mut out,
@@ -389,8 +412,7 @@ impl ShapeModel {
             what,
             reason: format!("row {row} contains NaN or infinity"),
         };
-        let mut p = ShapePrediction::default();
-        for i in 0..n {
+        let decode_row = |i: usize| -> Result<(f64, f64, f64, f64, [f64; 3])> {
             let angle = |v: &[f32], what| {
                 self.bins
                     .decode_orientation(&v[i * ka..(i + 1) * ka])
@@ -401,20 +423,35 @@ impl ShapeModel {
                     .decode_scale(&v[i * ks..(i + 1) * ks])
                     .ok_or_else(|| non_finite(what, i))
             };
-            p.orientation_a
-                .push(angle(&raw.angle_logits_a, "angle_logits_a")?);
-            p.orientation_b
-                .push(angle(&raw.angle_logits_b, "angle_logits_b")?);
-            p.scale_a
-                .push(scale(&raw.scale_logits_a, "scale_logits_a")?);
-            p.scale_b
-                .push(scale(&raw.scale_logits_b, "scale_logits_b")?);
             let r = &raw.residual_shape[3 * i..3 * i + 3];
             if r.iter().any(|v| !v.is_finite()) {
                 return Err(non_finite("residual_shape", i));
             }
-            p.residual_shape
-                .push([r[0] as f64, r[1] as f64, r[2] as f64]);
+            Ok((
+                angle(&raw.angle_logits_a, "angle_logits_a")?,
+                angle(&raw.angle_logits_b, "angle_logits_b")?,
+                scale(&raw.scale_logits_a, "scale_logits_a")?,
+                scale(&raw.scale_logits_b, "scale_logits_b")?,
+                [r[0] as f64, r[1] as f64, r[2] as f64],
+            ))
+        };
+        // Rows in parallel (the caller's rayon pool): decoding is about a tenth of the fast
+        // networks' inference time, and ONNX Runtime's threads are idle meanwhile.
+        let rows = (0..n)
+            .into_par_iter()
+            .with_min_len(64)
+            .map(decode_row)
+            .collect::<Vec<_>>()
+            .into_iter()
+            // In order, so that the error names the first bad row.
+            .collect::<Result<Vec<_>>>()?;
+        let mut p = ShapePrediction::default();
+        for (oa, ob, sa, sb, r) in rows {
+            p.orientation_a.push(oa);
+            p.orientation_b.push(ob);
+            p.scale_a.push(sa);
+            p.scale_b.push(sb);
+            p.residual_shape.push(r);
         }
         Ok(p)
     }

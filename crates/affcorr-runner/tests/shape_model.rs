@@ -137,6 +137,43 @@ fn batching_does_not_change_the_result() {
 }
 
 #[test]
+fn borrowed_slices_predict_as_patches_do() {
+    common::init();
+    let (a, b) = (random_patches(5, 7), random_patches(5, 8));
+    let m = echo();
+    assert_eq!(
+        m.predict_raw_slices(a.as_slice(), b.as_slice()).unwrap(),
+        m.predict_raw(&a, &b).unwrap()
+    );
+    let e = m
+        .predict_raw_slices(&a.as_slice()[..1000], b.as_slice())
+        .unwrap_err();
+    assert!(
+        matches!(
+            e,
+            RunnerError::InvalidInput {
+                what: "patch_a",
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+    let e = m
+        .predict_raw_slices(a.as_slice(), &b.as_slice()[..LEN])
+        .unwrap_err();
+    assert!(
+        matches!(
+            e,
+            RunnerError::InvalidInput {
+                what: "patch_b",
+                ..
+            }
+        ),
+        "{e:?}"
+    );
+}
+
+#[test]
 fn estimate_synthesises_acs_from_the_patches() {
     let m = echo();
     let est = ShapeEstimator::new(m);
