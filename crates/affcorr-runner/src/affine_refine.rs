@@ -193,24 +193,25 @@ impl<const C: usize> Plane<C> {
     fn new(image: &GrayImage, sigma: f64) -> Self {
         let (w, h) = (image.width(), image.height());
         let blurred = gaussian_blur(image, sigma);
-        let at = |x: usize, y: usize| blurred[y * w + x];
-        let data = (0..w * h)
-            .into_par_iter()
-            .with_min_len(4096)
-            .map(|i| {
-                let (x, y) = (i % w, i / w);
-                let mut px = [0.0; C];
-                px[0] = at(x, y);
-                if C == 3 {
-                    // Central differences, one-sided at the border.
-                    let (xl, xr) = (x.saturating_sub(1), (x + 1).min(w - 1));
-                    let (yu, yd) = (y.saturating_sub(1), (y + 1).min(h - 1));
-                    px[1] = (at(xr, y) - at(xl, y)) / ((xr - xl).max(1) as f32);
-                    px[2] = (at(x, yd) - at(x, yu)) / ((yd - yu).max(1) as f32);
-                }
-                px
-            })
-            .collect();
+        let mut data = vec![[0.0f32; C]; w * h];
+        data.par_chunks_mut(w).enumerate().for_each(|(y, out)| {
+            let row = &blurred[y * w..][..w];
+            if C == 1 {
+                out.iter_mut().zip(row).for_each(|(o, &v)| o[0] = v);
+                return;
+            }
+            // Central differences, one-sided at the border: (next − previous) / their distance.
+            let (yu, yd) = (y.saturating_sub(1), (y + 1).min(h - 1));
+            let (up, down) = (&blurred[yu * w..][..w], &blurred[yd * w..][..w]);
+            let dy = (yd - yu).max(1) as f32;
+            for x in 0..w {
+                let (xl, xr) = (x.saturating_sub(1), (x + 1).min(w - 1));
+                let o = &mut out[x];
+                o[0] = row[x];
+                o[1] = (row[xr] - row[xl]) / ((xr - xl).max(1) as f32);
+                o[2] = (down[x] - up[x]) / dy;
+            }
+        });
         Self {
             data,
             width: w,
