@@ -99,7 +99,7 @@ def graffiti_noisy():
     a, b = str(a), str(b)
     x2 = gt[:, 2:4] + np.random.default_rng(0).normal(0.0, 2.0, (len(gt), 2))
     est = affcorr.ShapeEstimator()
-    return gt, a, b, est, est.estimate(a, b, gt[:, :2], x2)
+    return gt, a, b, est, est.estimate(a, b, gt[:, :2], x2, refine=False)
 
 
 def test_graffiti_grid_is_the_homography():
@@ -133,11 +133,12 @@ def test_graffiti_refinement_accuracy(graffiti_noisy):
     assert without.refined.mean() < r.refined.mean() - 0.05
 
 
-def test_shape_estimator_refine_flag(graffiti_noisy):
+def test_shape_estimator_refines_by_default(graffiti_noisy):
     gt, a, b, est, corrs = graffiti_noisy
     x2 = corrs[:, 2:4]
-    refined = est.estimate(a, b, gt[:20, :2], x2[:20], refine=True)
+    refined = est.estimate(a, b, gt[:20, :2], x2[:20])
     np.testing.assert_array_equal(refined, affcorr.refine_affine(a, b, corrs[:20]).corrs)
+    assert not np.array_equal(refined, corrs[:20])
 
 
 @pytest.mark.parametrize(
@@ -152,6 +153,8 @@ def test_shape_estimator_refine_flag(graffiti_noisy):
         (dict(blur_sigmas="ab"), "blur_sigmas"),
         (dict(blur_sigmas=[-1.0]), "blur_sigmas"),
         (dict(min_zncc=2.0), "min_zncc"),
+        (dict(max_shift_std=0.0), "max_shift_std"),
+        (dict(max_shift_std=float("nan")), "max_shift_std"),
     ],
 )
 def test_bad_options_name_the_option(kwargs, match):

@@ -271,7 +271,7 @@ impl ShapeRunner {
     /// `(corrs (N, 8), orientation_a, orientation_b, scale_a, scale_b, residual_shape (N, 3))`;
     /// with `refine`, the corrs refined by `refine_affine` (default options) on the same
     /// decoded images.
-    #[pyo3(signature = (image_a, image_b, x1, x2, refine = false))]
+    #[pyo3(signature = (image_a, image_b, x1, x2, refine = true))]
     #[allow(clippy::type_complexity)]
     fn estimate<'py>(
         &self,
@@ -398,7 +398,8 @@ fn read_gray_image<'py>(py: Python<'py>, image: &Bound<'py, PyAny>) -> PyResult<
 #[pyfunction]
 #[pyo3(name = "refine_affine")]
 #[pyo3(signature = (
-    image_a, image_b, corrs, *, radius, blur_sigmas, iterations, min_zncc, move_points, try_identity
+    image_a, image_b, corrs, *, radius, blur_sigmas, iterations, min_zncc, move_points, try_identity,
+    max_shift_std
 ))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn refine_affine_py<'py>(
@@ -412,6 +413,7 @@ fn refine_affine_py<'py>(
     min_zncc: f64,
     move_points: bool,
     try_identity: bool,
+    max_shift_std: f64,
 ) -> PyResult<(F64<'py>, Bound<'py, PyArrayDyn<bool>>, F64<'py>)> {
     let rows = F64Array::extract(corrs, "corrs")?
         .expect(&[N, Dim::Is(8)])?
@@ -426,6 +428,7 @@ fn refine_affine_py<'py>(
         min_zncc,
         move_points,
         try_identity,
+        max_shift_std,
     };
     let r = py
         .detach(|| refine_affine(&img_a, &img_b, &rows, &options))
