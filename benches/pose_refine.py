@@ -65,7 +65,9 @@ def main(argv=None) -> None:
     ap.add_argument("--out", type=Path, default=ROOT / "benches/results/pose_refine.md")
     args = ap.parse_args(argv)
     t0 = time.time()
-    pipe = affcorr.Pipeline(args.matcher, threads=2, shape_model=args.shape_model)
+    pipe = affcorr.Pipeline(
+        args.matcher, threads=2, shape_model=args.shape_model, refine_affine=False
+    )
     rows = {"network": [], "network + LK": []}
     by_set = {}
     refine_s, refined_share = [], []

@@ -1,7 +1,7 @@
 """FLOPs per patch pair of the shape network (multiply-adds x 2), counted with forward hooks on
-the torch module that the ONNX model is exported from.
+the torch module that the ONNX model is exported from, for each architecture (or the named ones).
 
-    .venv/bin/python benches/shape_flops.py
+    .venv/bin/python benches/shape_flops.py [ARCH ...]
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "python"))
-from affcorr.train.shape_net import ShapeNet  # noqa: E402
+from affcorr.train.shape_net import ARCHITECTURES, ShapeNet  # noqa: E402
 
 
 def count_macs(net: torch.nn.Module, n: int = 1) -> int:
@@ -40,8 +40,11 @@ def count_macs(net: torch.nn.Module, n: int = 1) -> int:
 
 
 if __name__ == "__main__":
-    net = ShapeNet()
-    macs = count_macs(net, 2)
-    params = sum(p.numel() for p in net.parameters())
-    print(f"parameters: {params}")
-    print(f"multiply-adds per patch pair: {macs / 1e6:.2f} M ({2 * macs / 1e6:.2f} MFLOP)")
+    for name in sys.argv[1:] or ARCHITECTURES:
+        net = ShapeNet(name)
+        macs = count_macs(net, 2)
+        params = sum(p.numel() for p in net.parameters())
+        print(
+            f"{name}: {params} parameters, {macs / 1e6:.2f} M multiply-adds per patch pair "
+            f"({2 * macs / 1e6:.2f} MFLOP)"
+        )

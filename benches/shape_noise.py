@@ -46,7 +46,7 @@ def main(argv=None) -> None:
         x2 = gt[:, 2:4] + rng.normal(0.0, sigma, (len(gt), 2))
         for name, path in models:
             est = affcorr.ShapeEstimator(model=path or None, threads=1).estimate(
-                str(img1), str(img2), gt[:, :2], x2
+                str(img1), str(img2), gt[:, :2], x2, refine=False
             )
             fro, cos = affine_errors(est[:, 4:], gt[:, 4:])
             rows.append(

@@ -51,16 +51,16 @@ def test_match_show_and_homography(graf, tmp_path, capsys):
 
 
 def test_match_with_refinement(graf, tmp_path):
-    """--refine-affine gives refine_affine's ACs of the plain match."""
+    """The default (--refine-affine) gives refine_affine's ACs of the --no-refine-affine match."""
     import affcorr
 
     a, b, _ = graf
     plain, refined = tmp_path / "plain.npz", tmp_path / "refined.npz"
     common = ["--matcher", "xfeat", "--max-keypoints", "512", "--threads", "2"]
-    assert cli.main(["match", a, b, "-o", str(plain), *common]) == 0
-    assert cli.main(["match", a, b, "-o", str(refined), *common, "--refine-affine"]) == 0
+    assert cli.main(["match", a, b, "-o", str(plain), *common, "--no-refine-affine"]) == 0
+    assert cli.main(["match", a, b, "-o", str(refined), *common]) == 0
     expected = affcorr.refine_affine(a, b, np.load(plain)["corrs"]).corrs
-    np.testing.assert_array_equal(np.load(refined)["corrs"], expected)
+    np.testing.assert_allclose(np.load(refined)["corrs"], expected, rtol=0, atol=1e-9)
 
 
 def test_bad_inputs_exit_2_with_a_message(graf, tmp_path, capsys):
@@ -82,7 +82,9 @@ def test_match_with_a_dense_model(graf, tmp_path):
     truth = graffiti()[2]
     model = dense_homography_model(tmp_path / "gt.onnx", truth, (800, 640), (800, 640))
     out = tmp_path / "acs.npz"
-    assert cli.main(["match", a, b, "-o", str(out), "--dense-model", str(model)]) == 0
+    # --no-refine-affine: the test checks the dense matcher's own points.
+    args = ["match", a, b, "-o", str(out), "--dense-model", str(model), "--no-refine-affine"]
+    assert cli.main(args) == 0
     corrs = np.load(out)["corrs"]
     assert len(corrs) > 100
     # the test model's warp is the ground truth: every match lies on H (measured 1e-4 px)

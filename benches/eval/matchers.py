@@ -444,13 +444,14 @@ def _pipeline(max_keypoints: int):
 
 @functools.cache
 def shape_model_tag() -> str:
-    """The bundled shape network's identity (a hash of the ONNX file): part of every cache key
-    of ACs with affcorr's A, so a new model never reuses the old model's ACs."""
+    """The bundled shape network's identity (a hash of the ONNX file) and the refinement
+    ("-lk": affcorr's default affine Lucas-Kanade, which moves x2 too): part of every cache key
+    of ACs with affcorr's A, so a new model or default never reuses the old one's ACs."""
     import hashlib
 
     from affcorr.shape import bundled_shape_model
 
-    return hashlib.sha1(bundled_shape_model().read_bytes()).hexdigest()[:10]
+    return hashlib.sha1(bundled_shape_model().read_bytes()).hexdigest()[:10] + "-lk"
 
 
 @functools.cache
@@ -470,13 +471,16 @@ def affcorr_pipeline(img1: np.ndarray, img2: np.ndarray, max_keypoints: int = 20
 
 
 def with_affcorr_shapes(m: Matches, img1: np.ndarray, img2: np.ndarray) -> Matches:
-    """``m`` with A from affcorr's shape network at its matches (so any matcher's points get
-    affcorr's ACs); ``seconds`` grows by the network's time."""
+    """``m`` with A from affcorr's shape network at its matches, refined by affine
+    Lucas-Kanade (``ShapeEstimator.estimate``'s default, which moves x2 too), so any matcher's
+    points get affcorr's ACs; ``seconds`` grows by their time."""
     if len(m) == 0:
         return replace(m, A=np.zeros((0, 2, 2)))
     t0 = time.perf_counter()
     c = shape_estimator().estimate(_rgb_u8(img1), _rgb_u8(img2), m.x1, m.x2)
-    return replace(m, A=c[:, 4:].reshape(-1, 2, 2), seconds=m.seconds + time.perf_counter() - t0)
+    return replace(
+        m, x2=c[:, 2:4], A=c[:, 4:].reshape(-1, 2, 2), seconds=m.seconds + time.perf_counter() - t0
+    )
 
 
 # ------------------------------------------------------------------ the registry

@@ -128,7 +128,7 @@ impl PipelineRunner {
     #[pyo3(signature = (
         *, matcher, shape_model, backbone_model = None, refine_model = None,
         lighterglue_model = None, dense_model = None, ort_library = None, max_keypoints = None,
-        max_matches = None, max_side = None, threads = None, seed = 0, refine_affine = false
+        max_matches = None, max_side = None, threads = None, seed = 0, refine_affine = true
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -182,9 +182,7 @@ impl PipelineRunner {
         if let Some(n) = threads {
             b = b.threads(n);
         }
-        if refine_affine {
-            b = b.affine_refinement(AffineRefineOptions::default());
-        }
+        b = b.affine_refinement(refine_affine.then(AffineRefineOptions::default));
         py.detach(|| {
             init(ort_library.as_deref())?;
             b.build()

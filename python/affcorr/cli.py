@@ -101,8 +101,10 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--threads", type=int, default=None, help="default: all cores")
     p.add_argument(
         "--refine-affine",
-        action="store_true",
-        help="refine the ACs against the images by affine Lucas-Kanade (affcorr.refine_affine)",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="refine the ACs against the images by affine Lucas-Kanade (affcorr.refine_affine; "
+        "default: on)",
     )
 
 

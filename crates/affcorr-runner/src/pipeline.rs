@@ -365,7 +365,7 @@ impl Default for PipelineBuilder {
             max_side: None,
             threads: None,
             shape_batch_size: crate::shape::DEFAULT_BATCH_SIZE,
-            affine_refinement: None,
+            affine_refinement: Some(AffineRefineOptions::default()),
             seed: 0,
         }
     }
@@ -462,11 +462,13 @@ impl PipelineBuilder {
     }
 
     /// Refine the network's ACs against the working images by affine Lucas–Kanade
-    /// ([`crate::affine_refine`]; it moves x2 too with `move_points`). Default: off. On
-    /// graffiti 1→3 it takes the median ‖A − A_gt‖_F from ~0.4 to ~0.03 for the ACs it
-    /// refines, at about the shape network's cost.
-    pub fn affine_refinement(mut self, options: AffineRefineOptions) -> Self {
-        self.affine_refinement = Some(options);
+    /// ([`crate::affine_refine`]; it moves x2 too with `move_points`); `None` turns it off.
+    /// Default: on, with [`AffineRefineOptions::default`]. At XFeat+LighterGlue's matches on
+    /// 31 held-out real pairs it takes the median ‖A − A_gt‖_F from ~0.2 to ~0.01
+    /// (benches/results/eval/affine.md) and relative pose's AUC@5 from 52 to 59 %
+    /// (benches/results/pose_refine.md), at a few times the shape network's cost.
+    pub fn affine_refinement(mut self, options: Option<AffineRefineOptions>) -> Self {
+        self.affine_refinement = options;
         self
     }
 
