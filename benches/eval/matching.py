@@ -150,8 +150,10 @@ def main(argv=None) -> None:
         "pairs. MMAscore = sum_t (2 - 0.1 t) MMA@t / sum_t (2 - 0.1 t), t = 1..10 (paper "
         "Eq. 16). matches / correct: mean per pair (correct: within 3 px). time: median "
         "seconds per pair (detection + matching (+ shape network for affcorr)).",
-        "affcorr's points are XFeat+LighterGlue's (ONNX in Rust); its shape network adds A, "
-        "which this experiment does not score (experiment 2 does).",
+        "affcorr's matches are XFeat+LighterGlue's (ONNX in Rust); its shape network adds A, "
+        "which this experiment does not score (experiment 2 does), and its default affine "
+        "Lucas-Kanade refinement of the ACs moves x2 (affcorr.Pipeline(refine_affine=False) "
+        "keeps XFeat+LighterGlue's points).",
         *common.unavailable_note(wanted),
     ]
     cols = ["method", "MMAscore overall", "illumination", "viewpoint"]

@@ -271,7 +271,7 @@ impl ShapeRunner {
     /// `(corrs (N, 8), orientation_a, orientation_b, scale_a, scale_b, residual_shape (N, 3))`;
     /// with `refine`, the corrs refined by `refine_affine` (default options) on the same
     /// decoded images.
-    #[pyo3(signature = (image_a, image_b, x1, x2, refine = true))]
+    #[pyo3(signature = (image_a, image_b, x1, x2, refine = false))]
     #[allow(clippy::type_complexity)]
     fn estimate<'py>(
         &self,

@@ -187,7 +187,7 @@ class ShapeEstimator:
         self, image_a: ImageLike, image_b: ImageLike, x1: ArrayLike, x2: ArrayLike
     ) -> ShapeEstimate:
         """Like :meth:`estimate`, with the per-patch orientations, scales and residual shapes."""
-        return ShapeEstimate(*self._runner.estimate(image_a, image_b, x1, x2))
+        return ShapeEstimate(*self._runner.estimate(image_a, image_b, x1, x2, False))
 
     def predict(
         self, patches_a: ArrayLike, patches_b: ArrayLike, *, return_logits: bool = False
