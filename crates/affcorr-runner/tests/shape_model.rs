@@ -136,6 +136,14 @@ fn batching_does_not_change_the_result() {
     assert!(m1.predict(&empty, &empty).unwrap().is_empty());
 }
 
+/// `e` is the typed error for a bad argument called `what`.
+fn assert_invalid(e: &RunnerError, what: &str) {
+    assert!(
+        matches!(e, RunnerError::InvalidInput { what: w, .. } if *w == what),
+        "{e:?}"
+    );
+}
+
 #[test]
 fn borrowed_slices_predict_as_patches_do() {
     common::init();
@@ -148,29 +156,11 @@ fn borrowed_slices_predict_as_patches_do() {
     let e = m
         .predict_raw_slices(&a.as_slice()[..1000], b.as_slice())
         .unwrap_err();
-    assert!(
-        matches!(
-            e,
-            RunnerError::InvalidInput {
-                what: "patch_a",
-                ..
-            }
-        ),
-        "{e:?}"
-    );
+    assert_invalid(&e, "patch_a");
     let e = m
         .predict_raw_slices(a.as_slice(), &b.as_slice()[..LEN])
         .unwrap_err();
-    assert!(
-        matches!(
-            e,
-            RunnerError::InvalidInput {
-                what: "patch_b",
-                ..
-            }
-        ),
-        "{e:?}"
-    );
+    assert_invalid(&e, "patch_b");
 }
 
 #[test]
@@ -242,16 +232,7 @@ fn bad_estimator_inputs_are_named() {
         .model()
         .predict(&random_patches(3, 0), &random_patches(2, 0))
         .unwrap_err();
-    assert!(
-        matches!(
-            e,
-            RunnerError::InvalidInput {
-                what: "patch_b",
-                ..
-            }
-        ),
-        "{e:?}"
-    );
+    assert_invalid(&e, "patch_b");
     assert!(matches!(
         Patches::from_vec(vec![0.0; 1000]),
         Err(RunnerError::InvalidInput {
