@@ -83,8 +83,10 @@ fn bench(c: &mut Criterion) {
         .expect("rayon pool");
     let refined = pool.install(|| refine_affine(&img_a, &img_b, &corrs, &options).unwrap());
     let share = refined.refined.iter().filter(|r| **r).count() as f64 / ACS as f64;
+    // 94.5% since the max_shift_std check (some windows of this smooth texture are too
+    // weakly textured in one direction), above 95% before it.
     assert!(
-        share > 0.95,
+        share > 0.9,
         "only {share} of the ACs refined: not a benchmark of success"
     );
 

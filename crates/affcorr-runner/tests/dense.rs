@@ -234,6 +234,8 @@ fn dense_pipeline(max_matches: usize) -> Pipeline {
         .shape_model(common::bundled_model())
         .max_matches(max_matches)
         .threads(2)
+        // The tests check the matcher's own points; the refinement would move them.
+        .affine_refinement(None)
         .build()
         .unwrap()
 }
