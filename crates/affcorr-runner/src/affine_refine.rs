@@ -507,11 +507,10 @@ fn refine_one(
     let a0 = [c[4], c[5], c[6], c[7]];
     let (mut a, mut t) = (Matrix2::new(a0[0], a0[1], a0[2], a0[3]), [0.0, 0.0]);
     let radius = options.radius as f64;
-    let mut flat = false;
+    // The finest level's Gauss–Newton matrix; `None` when that window is flat.
     let mut h_finest = None;
     for (l, level) in levels.iter().enumerate() {
         let Some(h) = window.prepare(level, x1) else {
-            flat = l + 1 == levels.len();
             continue;
         };
         if l + 1 == levels.len() {
@@ -573,7 +572,7 @@ fn refine_one(
     }
     // Judged at the finest level, which the window still holds from the last pass of the
     // loop: the input, then the result.
-    let Some(h) = h_finest.filter(|_| !flat) else {
+    let Some(h) = h_finest else {
         return (false, *c, f64::NAN);
     };
     let finest = levels.last().expect("at least one level");
