@@ -140,9 +140,8 @@ fn points(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<[f64; 2]>>
     Ok(a.rows::<2>().to_vec())
 }
 
-/// Patches `(N, 1, 32, 32)`, any float dtype, finite.
-/// `obj` as a C-contiguous float32 (N, 1, 32, 32) array of finite values, borrowed (no copy
-/// when it already is one).
+/// `obj` (any float dtype) as a C-contiguous float32 (N, 1, 32, 32) array of finite values,
+/// borrowed (no copy when it already is one).
 fn patches<'py>(
     py: Python<'py>,
     obj: &Bound<'py, PyAny>,

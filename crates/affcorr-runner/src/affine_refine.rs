@@ -41,10 +41,16 @@
 //! warp so far (up to 4 times).
 //!
 //! A result is kept only when it is plausible: finite, det A > 0, α > 0, the translation t
-//! within R/2, and its weighted zero-mean normalised cross-correlation (ZNCC) at the finest
-//! level both higher than the input's and at least [`AffineRefineOptions::min_zncc`].
-//! Otherwise the input AC comes back unchanged (textureless or occluded windows, repetitive
-//! texture).
+//! within R/2, its weighted zero-mean normalised cross-correlation (ZNCC) at the finest
+//! level both higher than the input's and at least [`AffineRefineOptions::min_zncc`], and t
+//! well determined: the worst-direction standard deviation of t from σ² H⁻¹ at the finest level
+//! (`Window::shift_std`) at most [`AffineRefineOptions::max_shift_std`], which refuses windows
+//! on a lone edge, where a shift along it fits as well (the aperture problem). Otherwise the
+//! input AC comes back unchanged (textureless or occluded windows, repetitive texture).
+//!
+//! Known limit: a window can fit a quite different (t, A) about as well as the true one, and
+//! then the fit is well determined around the wrong optimum; no check here sees it
+//! (docs/shape_network.md, "Known limit").
 
 use nalgebra::{Matrix2, SMatrix, SVector};
 use rayon::prelude::*;
@@ -80,9 +86,9 @@ pub struct AffineRefineOptions {
     /// to 78% (docs/shape_network.md).
     pub try_identity: bool,
     /// Largest accepted standard deviation of the fitted translation, pixels of image B (the
-    /// worst direction of its covariance, see the module docs). Default 0.5. Along an edge
-    /// the window matches equally well anywhere (the aperture problem): on graffiti 1→3
-    /// started from exact points, 19% of the ACs moved more than 2 px without this check.
+    /// worst direction of its covariance, see the module docs). Default 0.5. Along a lone edge
+    /// the window matches about equally well anywhere (the aperture problem); this check
+    /// refuses such fits.
     pub max_shift_std: f64,
 }
 
