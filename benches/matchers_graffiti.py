@@ -132,7 +132,7 @@ def main(argv=None) -> None:
         f"Python), on {platform.machine()} with load average {load:.1f} (the machine was shared "
         "with a training job): see benches/results/matchers_timing.md for the model timings.",
         "",
-        "DESIGN.md §7's earlier numbers (711/1567, 418/811, 649/1351, 1086/1498) came from "
+        "docs/design.md §7's earlier numbers (711/1567, 418/811, 649/1351, 1086/1498) came from "
         "the colour images, which XFeat turns into (R+G+B)/3 rather than luminance. The same "
         "ONNX path on that channel-mean image, in this run:",
         "",

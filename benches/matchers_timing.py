@@ -136,11 +136,11 @@ def main(argv=None) -> None:
         + __import__("onnxruntime").__version__
         + f" with {args.threads} intra-op threads; torch = Debian's CPU torch "
         + (torch.__version__ if torch else "(not run)")
-        + f" with {args.threads} threads (its generic BLAS is slow: DESIGN.md §7). Medians of "
+        + f" with {args.threads} threads (its generic BLAS is slow: docs/design.md §7). Medians of "
         + f"{n} runs (upstream LighterGlue: {max(1, n // 2)}).",
         "",
         f"**Load average {load:.1f} on {os.cpu_count()} cores when this finished** (a training "
-        "job shared the machine), so absolute numbers are pessimistic (DESIGN.md §7 measured "
+        "job shared the machine), so absolute numbers are pessimistic (docs/design.md §7 measured "
         "28 ms for the ONNX backbone on an idle machine).",
         "",
         "| stage | ONNX (ms) | torch (ms) |",

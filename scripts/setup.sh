@@ -2,7 +2,7 @@
 # One-time setup of a fresh Debian machine: builds affcorr into .venv.
 #
 # .venv is made from Debian's python3 with --system-site-packages, because the only CPU build of
-# torch that can be had offline is Debian's python3-torch (DESIGN.md §7); torch is needed for the
+# torch that can be had offline is Debian's python3-torch (docs/design.md §7); torch is needed for the
 # training extras and their tests only (AFFCORR_WITH_TORCH=1), never at run time.
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -1,4 +1,4 @@
-"""Torch losses over the Rust Sampson kernels (DESIGN.md §3): agreement with the pure-torch
+"""Torch losses over the Rust Sampson kernels (docs/design.md §3): agreement with the pure-torch
 reference, gradcheck, dtype/shape handling, and that the losses drive A toward the exact one."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Sampson distances (DESIGN.md §3) from Python: the Rust kernels against an independent numpy
+"""Sampson distances (docs/design.md §3) from Python: the Rust kernels against an independent numpy
 implementation of the formulas, exact plane-induced ACs, gradients against finite differences,
 and every bad-input path."""
 

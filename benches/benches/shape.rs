@@ -1,4 +1,4 @@
-//! Throughput of the shape-network runner, in patch pairs per second (DESIGN.md §6).
+//! Throughput of the shape-network runner, in patch pairs per second (docs/design.md §6).
 //!
 //! - `shape/extract/t2/512`: cutting 512 patch pairs (two 32×32 bilinear patches each) from two
 //!   1024×768 images, in a rayon pool of 2 threads.

@@ -7,7 +7,7 @@ Images are uint8 (H, W) gray or (H, W, 3) RGB. Every method detects at most ``ma
 per image (Hessian-Affine has no keypoint score to rank by: it keeps all it finds; ASIFT spreads
 the budget over its simulated views, see :func:`asift`) and matches by mutual nearest neighbours
 of descriptors, unless it has a learned matcher (LightGlue, LighterGlue). ``A = dx2/dx1``
-(DESIGN.md §2) where a method gives shapes:
+(docs/design.md §2) where a method gives shapes:
 
 - ``sift``: similarity ``s R(dtheta)`` from keypoint sizes and angles;
 - ``asift``: OpenCV's ``cv2.AffineFeature`` reports its keypoints back-projected as similarities
@@ -76,7 +76,7 @@ class Matches:
 
     @property
     def corrs(self) -> np.ndarray:
-        """(N, 4) ``[x1, y1, x2, y2]``, or (N, 8) ACs when A is known (DESIGN.md §2)."""
+        """(N, 4) ``[x1, y1, x2, y2]``, or (N, 8) ACs when A is known (docs/design.md §2)."""
         pts = np.c_[self.x1, self.x2]
         return pts if self.A is None else np.c_[pts, self.A.reshape(-1, 4)]
 
@@ -100,7 +100,7 @@ def _matches(x1, x2, A, score, seconds) -> Matches:
 
 
 def similarity(theta: np.ndarray, scale: np.ndarray | float = 1.0) -> np.ndarray:
-    """``scale R(theta)`` per entry, (N, 2, 2), R = [[cos, -sin], [sin, cos]] (DESIGN.md §2)."""
+    """``scale R(theta)`` per entry, (N, 2, 2), R = [[cos, -sin], [sin, cos]] (docs/design.md §2)."""
     import affcorr
 
     theta = np.asarray(theta, np.float64).reshape(-1)
@@ -284,7 +284,7 @@ def _similarity_matches(detector, img1, img2) -> Matches:
     i, j, dist = mutual_nn(d1, d2)
     x1 = np.array([k1[a].pt for a in i]).reshape(-1, 2)
     x2 = np.array([k2[b].pt for b in j]).reshape(-1, 2)
-    # OpenCV's keypoint angle (degrees) turns the same way as DESIGN.md's R(theta) (checked on a
+    # OpenCV's keypoint angle (degrees) turns the same way as docs/design.md's R(theta) (checked on a
     # rotated image: angle2 - angle1 = +theta).
     ang = np.radians([k2[b].angle - k1[a].angle for a, b in zip(i, j)])
     s = np.array([k2[b].size / k1[a].size for a, b in zip(i, j)])

@@ -1,7 +1,7 @@
 """Image pairs with a known relative pose for experiment 3 (benches/eval/pose.py).
 
 Every pair is a :class:`PosePair`: two uint8 gray images, pinhole intrinsics K1, K2 and the
-motion ``X2 = R X1 + t`` (DESIGN.md §2; ``t`` has unit norm, the scale is unobservable).
+motion ``X2 = R X1 + t`` (docs/design.md §2; ``t`` has unit norm, the scale is unobservable).
 
 - ``chessboard``: Debian opencv-doc's calibration set (left01..14, right01..14 without 10). The
   board poses of the left views come from ``left_intrinsics.yml`` (its ``extrinsic_parameters``),

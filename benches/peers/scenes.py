@@ -2,7 +2,7 @@
 
 A scene is planes n^T X1 = d seen by two cameras with anisotropic intrinsics (fx != fy, K1 != K2)
 and motion X2 = R X1 + t. Each correspondence is an exact AC (x1, x2 = H x1, A = dx2/dx1 of its
-plane's homography, DESIGN.md §2), then:
+plane's homography, docs/design.md §2), then:
 
 - Gaussian noise of SIGMA px on x2 and SIGMA_A on each entry of A (inliers);
 - a fraction of the rows replaced by outliers: x2 uniform in image 2, A a random rotation-scale.

@@ -1,7 +1,7 @@
 """affcorr: affine correspondences for relative pose, homography and fundamental estimation.
 
 An affine correspondence (AC) is a point match ``x1 <-> x2`` that also carries the local affine
-map ``A = dx2/dx1`` between the two images. Conventions (see DESIGN.md §2):
+map ``A = dx2/dx1`` between the two images. Conventions (see docs/design.md §2):
 
 - arrays are float64 (any input dtype or memory order is converted);
 - ACs are ``(N, 8)`` rows ``[x1, y1, x2, y2, a11, a12, a21, a22]``; points alone are ``(N, 4)``;

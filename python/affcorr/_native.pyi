@@ -1,6 +1,6 @@
 """Type stubs of the Rust extension ``affcorr._native``.
 
-Conventions (DESIGN.md §2): float64 arrays (other dtypes and memory orders are converted);
+Conventions (docs/design.md §2): float64 arrays (other dtypes and memory orders are converted);
 ACs are ``(N, 8)`` rows ``[x1, y1, x2, y2, a11, a12, a21, a22]`` with ``A = dx2/dx1``;
 ``p2^T F p1 = 0``; motion ``X2 = R X1 + t``, ``E = [t]x R``; angles in radians.
 Bad inputs raise ``ValueError`` naming the argument.
@@ -70,7 +70,7 @@ def pose_from_essential(
     """The (R, t) of E that puts the most normalised correspondences x1, x2 (N, 2) in front of
     both cameras, and that count."""
 
-# --- Sampson distances (DESIGN.md §3) ---------------------------------------------------------
+# --- Sampson distances (docs/design.md §3) ---------------------------------------------------------
 # F is (3, 3), shared by every row, or (N, 3, 3), one per row. Distances are in squared units of
 # the coordinates (pixels^2 for a pixel F) and invariant to the scale of F. A zero denominator
 # (only for special F) gives 0 when the residual is 0 too, else +inf, with zero gradient.
@@ -219,7 +219,7 @@ def essential_lsq(
     """Like essential_8pt with the three equations of each normalised AC in corrs (M, 8) stacked
     under the point rows; needs N + 3M >= 8. x1, x2 may have zero rows."""
 
-# --- shape network runner (DESIGN.md §6; wrapped by affcorr.shape) ----------------------------
+# --- shape network runner (docs/design.md §6; wrapped by affcorr.shape) ----------------------------
 
 class ShapeRunner:
     """The shape network loaded through ONNX Runtime (use ``affcorr.ShapeEstimator``).

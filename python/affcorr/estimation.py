@@ -1,7 +1,7 @@
 """Robust estimation, PoseLib-like: each ``estimate_*`` returns ``(model, info)``.
 
 The estimators run in Rust (``affcorr-ransac``) with the GIL released: a hypothesise-and-verify
-loop with adaptive termination, local optimisation and a final refinement (DESIGN.md §5).
+loop with adaptive termination, local optimisation and a final refinement (docs/design.md §5).
 
 - ``corrs`` is ``(N, 8)`` ACs ``[x1, y1, x2, y2, a11, a12, a21, a22]`` (``A = dx2/dx1``) or
   ``(N, 4)`` points ``[x1, y1, x2, y2]``, in pixels. ACs are sampled 2 at a time for H and E

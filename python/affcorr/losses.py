@@ -1,6 +1,6 @@
-"""Torch losses over the Rust Sampson kernels (DESIGN.md §3). Needs the ``affcorr[train]`` extra.
+"""Torch losses over the Rust Sampson kernels (docs/design.md §3). Needs the ``affcorr[train]`` extra.
 
-torch comes from Debian's ``python3-torch`` (DESIGN.md §7); it is never imported by
+torch comes from Debian's ``python3-torch`` (docs/design.md §7); it is never imported by
 ``import affcorr``, only by ``import affcorr.losses``.
 
 - :func:`point_sampson` ``(F, corrs) -> (N,)``: SD_P per row, differentiable w.r.t. ``F`` and
@@ -9,7 +9,7 @@ torch comes from Debian's ``python3-torch`` (DESIGN.md §7); it is never importe
   constraint ``A^T (F p1)[:2] + (F^T p2)[:2] = 0``; SD_A is the sum of the two columns
   (:class:`AffineSampsonFunction`).
 - :class:`PointSampsonLoss` and :class:`AffineSampsonLoss`: the positive means
-  L_pc = mean SD_P and L_aff = mean SD_A (DESIGN.md §3; the paper's minus sign is a typo).
+  L_pc = mean SD_P and L_aff = mean SD_A (docs/design.md §3; the paper's minus sign is a typo).
 - :func:`reference_point_sampson`, :func:`reference_affine_sampson`: the same distances in plain
   torch ops, a check on the kernels (they agree to 1e-10 in float64).
 
@@ -156,7 +156,7 @@ def _check_reduction(reduction: str) -> str:
 
 
 class PointSampsonLoss(torch.nn.Module):
-    """L_pc = mean over rows of SD_P (DESIGN.md §3); ``reduction`` as in torch ('mean' default).
+    """L_pc = mean over rows of SD_P (docs/design.md §3); ``reduction`` as in torch ('mean' default).
 
     ``forward(F, corrs)`` with F (3, 3) or (N, 3, 3) and corrs (N, 4) or (N, 8).
     """
@@ -170,7 +170,7 @@ class PointSampsonLoss(torch.nn.Module):
 
 
 class AffineSampsonLoss(torch.nn.Module):
-    """L_aff = mean over rows of SD_A = SD_A,0 + SD_A,1 (DESIGN.md §3); ``reduction`` as in
+    """L_aff = mean over rows of SD_A = SD_A,0 + SD_A,1 (docs/design.md §3); ``reduction`` as in
     torch ('mean' default; 'none' gives SD_A per row, (N,)).
 
     ``forward(F, corrs)`` with F (3, 3) or (N, 3, 3) and corrs (N, 8).

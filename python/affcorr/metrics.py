@@ -1,5 +1,5 @@
 """Accuracy measures against a ground-truth homography, shared by the CLI, the plots, the demo,
-the benches and the tests (DESIGN.md §2 conventions: p2 ~ H p1, A = dx2/dx1)."""
+the benches and the tests (docs/design.md §2 conventions: p2 ~ H p1, A = dx2/dx1)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Minimal and non-minimal solvers (DESIGN.md §4), the kernels inside every RANSAC iteration.
+"""Minimal and non-minimal solvers (docs/design.md §4), the kernels inside every RANSAC iteration.
 
 Each takes a sample and returns a list of candidate models, each a (3, 3) float64 array with unit
 Frobenius norm (sign arbitrary); a degenerate sample (collinear or repeated points, det A <= 0,

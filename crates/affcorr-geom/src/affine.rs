@@ -1,4 +1,4 @@
-//! Affine synthesis and decomposition (DESIGN.md §2, paper eqs. 4–7).
+//! Affine synthesis and decomposition (docs/design.md §2, paper eqs. 4–7).
 //!
 //! - `A = s · R(θ) · A′`, with s = √det A > 0, R(θ) = [[cos θ, −sin θ], [sin θ, cos θ]] and
 //!   A′ = [[a, 0], [b, 1/a]], a > 0: lower triangular, positive diagonal, det 1 (AffNet's form).

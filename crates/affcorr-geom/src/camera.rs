@@ -1,4 +1,4 @@
-//! Camera intrinsics and normalised coordinates (DESIGN.md §2).
+//! Camera intrinsics and normalised coordinates (docs/design.md §2).
 //!
 //! - A pixel p = (x, y, 1) becomes x̂ = K⁻¹ p.
 //! - An AC's A becomes Â = K2\[0:2,0:2\]⁻¹ · A · K1\[0:2,0:2\]: the chain rule through

@@ -1,4 +1,4 @@
-//! Essential and fundamental matrices, and relative pose (DESIGN.md §2).
+//! Essential and fundamental matrices, and relative pose (docs/design.md §2).
 //!
 //! - Motion: X2 = R X1 + t. Then E = \[t\]× R and p̂2ᵀ E p̂1 = 0 for normalised points.
 //! - F = K2⁻ᵀ E K1⁻¹, so p2ᵀ F p1 = 0 in pixels.

@@ -1,4 +1,4 @@
-//! The affine correspondence a homography induces (DESIGN.md §2).
+//! The affine correspondence a homography induces (docs/design.md §2).
 //!
 //! With p2 ~ H p1, x2 = (h₁·p1, h₂·p1) / w and w = h₃·p1, the Jacobian is
 //! A = ∂x2/∂x1 = (H\[0:2,0:2\] − x2 · H\[2,0:2\]) / w.

@@ -1,4 +1,4 @@
-//! Geometry core of affcorr: the conventions of DESIGN.md §2–3 in one place.
+//! Geometry core of affcorr: the conventions of docs/design.md §2–3 in one place.
 //!
 //! Module map:
 //! - [`types`]: the affine correspondence (AC) and the `(N, 8)` / `(N, 4)` row layouts.

@@ -1,4 +1,4 @@
-//! Point and affine Sampson distances with analytic gradients (DESIGN.md §3).
+//! Point and affine Sampson distances with analytic gradients (docs/design.md §3).
 //!
 //! API: scalar forms for hot loops ([`sampson_point`], [`sampson_affine`], the fused
 //! [`sampson_point_affine`], and the `_grad` twins returning [`PointSampsonGrad`] /
@@ -12,7 +12,7 @@
 //! Notation: p = (x, y, 1)ᵀ, l1 = F p1 and l2 = Fᵀ p2 (the epipolar lines of x1 in image 2 and
 //! of x2 in image 1). Indices i, j, k run over {0, 1}; m, n over {0, 1, 2} when they index F.
 //! `[c]` is 1 when the condition c holds, else 0. F is row-major everywhere (`F[m][n]`), and
-//! A = ∂x2/∂x1 is row-major (a₀₀, a₀₁, a₁₀, a₁₁) as in DESIGN.md §2.
+//! A = ∂x2/∂x1 is row-major (a₀₀, a₀₁, a₁₀, a₁₁) as in docs/design.md §2.
 //!
 //! **Point.** SD_P = e² / D with
 //!
@@ -23,7 +23,7 @@
 //! ∂D/∂F_mn = 2 [m<2] l1_m p1_n + 2 [n<2] l2_n p2_m
 //! ```
 //!
-//! **Affine**, per constraint row k (DESIGN.md §2): SD_A,k = r_k² / G_k, where G_k is the
+//! **Affine**, per constraint row k (docs/design.md §2): SD_A,k = r_k² / G_k, where G_k is the
 //! squared norm of ∂r_k/∂(x1, y1, x2, y2, a_0k, a_1k). With B = Aᵀ F[0:2, 0:2], i.e.
 //! B_kj = Σ_i a_ik F_ij:
 //!
@@ -86,7 +86,7 @@ impl<'a> From<&'a Vec<[f64; 9]>> for Fundamentals<'a> {
     }
 }
 
-/// SD_P and its gradient. Arrays are in the layouts of DESIGN.md §2: `d_f` is row-major.
+/// SD_P and its gradient. Arrays are in the layouts of docs/design.md §2: `d_f` is row-major.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PointSampsonGrad {
     /// SD_P.
@@ -288,7 +288,7 @@ fn affine_terms(f: &Mat3, ac: &AffineCorrespondence) -> AffineTerms {
 }
 
 /// The affine Sampson distances `[SD_A,0, SD_A,1]`, one per row of the affine epipolar
-/// constraint Aᵀ (F p1)₁:₂ + (Fᵀ p2)₁:₂ = 0 (DESIGN.md §2–3). SD_A is their sum.
+/// constraint Aᵀ (F p1)₁:₂ + (Fᵀ p2)₁:₂ = 0 (docs/design.md §2–3). SD_A is their sum.
 ///
 /// ```
 /// use affcorr_geom::sampson::sampson_affine;
@@ -314,7 +314,7 @@ pub fn sampson_affine(f: &Mat3, ac: &AffineCorrespondence) -> [f64; 2] {
 }
 
 /// `(SD_P, [SD_A,0, SD_A,1])` of one AC, sharing F p1 and Fᵀ p2: bit-identical to
-/// [`sampson_point`] and [`sampson_affine`], for residuals that mix the two (DESIGN.md §5).
+/// [`sampson_point`] and [`sampson_affine`], for residuals that mix the two (docs/design.md §5).
 #[inline]
 pub fn sampson_point_affine(f: &Mat3, ac: &AffineCorrespondence) -> (f64, [f64; 2]) {
     let t = affine_terms(f, ac);

@@ -223,7 +223,7 @@ mod tests {
                 let (l1, l2) = (f * p1, f.transpose() * p2);
                 let scale = l1.norm() * p2.norm();
                 assert!(p2.dot(&l1).abs() < 1e-12 * scale);
-                // DESIGN.md §2: Aᵀ (F p1)₁:₂ + (Fᵀ p2)₁:₂ = 0.
+                // docs/design.md §2: Aᵀ (F p1)₁:₂ + (Fᵀ p2)₁:₂ = 0.
                 let r = ac.a.transpose() * l1.xy() + l2.xy();
                 assert!(r.norm() < 1e-11 * l1.xy().norm().max(l2.xy().norm()), "{r}");
             }

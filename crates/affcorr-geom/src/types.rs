@@ -1,4 +1,4 @@
-//! Affine correspondences and their row layouts (DESIGN.md §2).
+//! Affine correspondences and their row layouts (docs/design.md §2).
 //!
 //! - An AC is `(x1, x2, A)` with `A = ∂x2/∂x1`, the Jacobian of the map image 1 → image 2 at x1.
 //! - Row layout `(N, 8)`: `[x1, y1, x2, y2, a11, a12, a21, a22]` (the same as GC-RANSAC's).

@@ -1,4 +1,4 @@
-//! Robust estimation (DESIGN.md §5): one hypothesise-and-verify engine and the problems people
+//! Robust estimation (docs/design.md §5): one hypothesise-and-verify engine and the problems people
 //! use it for.
 //!
 //! Module map (the axes vary independently, as in kornia-rs's `ransac`):

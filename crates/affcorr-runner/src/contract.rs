@@ -1,4 +1,4 @@
-//! Loading the matcher models and checking them against their ONNX contracts (DESIGN.md §6,
+//! Loading the matcher models and checking them against their ONNX contracts (docs/design.md §6,
 //! docs/matchers.md).
 //!
 //! Every matcher model names its contract in the custom metadata key `affcorr.contract`. A model

@@ -1,4 +1,4 @@
-//! Dense matchers (DKM, RoMa) under the `dense-warp-v1` contract (DESIGN.md §6,
+//! Dense matchers (DKM, RoMa) under the `dense-warp-v1` contract (docs/design.md §6,
 //! docs/matchers.md), and DKM's balanced sampling of matches from their certainty map.
 //!
 //! # The contract
@@ -17,7 +17,7 @@
 //! (`torch.linspace(-1 + 1/W′, 1 - 1/W′, W′)`), so −1 and 1 are the *outer edges* of the
 //! image (`align_corners=False`), and its `to_pixel_coordinates` maps u to W/2 · (u + 1): pixel
 //! units whose first pixel *centre* is at 0.5. affcorr puts pixel centres at integers
-//! (DESIGN.md §2), so here
+//! (docs/design.md §2), so here
 //!
 //! > x = W/2 · (u + 1) − 0.5,  y = H/2 · (v + 1) − 0.5
 //!

@@ -100,7 +100,7 @@ pub enum RunnerError {
         /// ONNX Runtime's message.
         reason: String,
     },
-    /// A valid ONNX model that breaks the network's contract (DESIGN.md §6): wrong or missing
+    /// A valid ONNX model that breaks the network's contract (docs/design.md §6): wrong or missing
     /// inputs, outputs or metadata, or logits whose widths differ from the bin counts.
     #[error("model {model} violates the {contract} contract: {reason}")]
     Contract {

@@ -1,4 +1,4 @@
-//! Images and matched points in, affine correspondences out (DESIGN.md §2, §6).
+//! Images and matched points in, affine correspondences out (docs/design.md §2, §6).
 //!
 //! For each match x1 ↔ x2, a 32×32 patch is cut around x1 in image A and around x2 in image B
 //! ([`crate::patches`]); the shape network gives each patch an orientation O and a scale S and

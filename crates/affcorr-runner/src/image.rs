@@ -1,4 +1,4 @@
-//! Images as the networks see them: grayscale `f32` in [0, 1], row-major H×W (DESIGN.md §2).
+//! Images as the networks see them: grayscale `f32` in [0, 1], row-major H×W (docs/design.md §2).
 //!
 //! - Decoding (PNG, JPEG) through the `image` crate; 8-bit samples are divided by 255 and
 //!   16-bit samples by 65535, float samples are taken as they are.

@@ -1,4 +1,4 @@
-//! ONNX runner of affcorr's networks (DESIGN.md §6): images and matches in, affine
+//! ONNX runner of affcorr's networks (docs/design.md §6): images and matches in, affine
 //! correspondences out.
 //!
 //! - [`ort_env`]: loads ONNX Runtime at run time (`ORT_DYLIB_PATH` or [`init_ort`]); one
@@ -19,7 +19,7 @@
 //!   stage.
 //! - [`error`]: [`RunnerError`], which names what went wrong.
 //!
-//! Conventions are DESIGN.md §2's: pixels (x, y) with x right and y down, pixel centres at
+//! Conventions are docs/design.md §2's: pixels (x, y) with x right and y down, pixel centres at
 //! integer coordinates, ACs `[x1, y1, x2, y2, a11, a12, a21, a22]` with A = ∂x2/∂x1, radians.
 //!
 //! # Example

@@ -1,4 +1,4 @@
-//! The process-wide ONNX Runtime environment (DESIGN.md §6).
+//! The process-wide ONNX Runtime environment (docs/design.md §6).
 //!
 //! The runner loads ONNX Runtime at run time (`ort`'s `load-dynamic`): nothing is linked or
 //! downloaded at build time. The library is the one the PyPI wheel `onnxruntime` ships

@@ -1,4 +1,4 @@
-//! 32×32 patches at sub-pixel centres, cut by bilinear sampling (DESIGN.md §6).
+//! 32×32 patches at sub-pixel centres, cut by bilinear sampling (docs/design.md §6).
 //!
 //! Pixel (r, c) of the patch around (x, y) is the image read at
 //!
@@ -7,7 +7,7 @@
 //! ```
 //!
 //! so the patch centre, between its pixels 15 and 16, is (x, y). Pixel centres lie at integer
-//! coordinates, x to the right and y down (DESIGN.md §2). The image is read bilinearly,
+//! coordinates, x to the right and y down (docs/design.md §2). The image is read bilinearly,
 //!
 //! ```text
 //! I(u, v) = (1−fx)(1−fy) I[y0, x0] + fx (1−fy) I[y0, x0+1] + (1−fx) fy I[y0+1, x0] + fx fy I[y0+1, x0+1]

@@ -45,7 +45,7 @@
 //!    images, the shape network's A at them ([`crate::estimator`]).
 //! 6. The ACs are mapped back to the original pixels (pixel centres at integers, image edges
 //!    aligned): x = (x_work + 0.5)/s − 0.5 per axis, and A = diag(1/s_B) · A_work · diag(s_A)
-//!    (A = ∂x2/∂x1, DESIGN.md §2).
+//!    (A = ∂x2/∂x1, docs/design.md §2).
 //!
 //! [`Pipeline::homography`] and [`Pipeline::relative_pose`] add **ransac**: affcorr-ransac's
 //! estimators on the ACs (2-AC samples unless the options say otherwise). With PROSAC sampling

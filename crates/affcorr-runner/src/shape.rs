@@ -1,5 +1,5 @@
 //! The shape network: its ONNX contract, inference in batches, and the decoding of its logits
-//! into orientations and scales (DESIGN.md §6, paper eqs. 4–7).
+//! into orientations and scales (docs/design.md §6, paper eqs. 4–7).
 //!
 //! # Contract `shape-v1`
 //!

@@ -1,4 +1,4 @@
-//! Essential-matrix solvers for calibrated cameras (DESIGN.md §4), one file per solver.
+//! Essential-matrix solvers for calibrated cameras (docs/design.md §4), one file per solver.
 //!
 //! | solver | sample | max models | reference |
 //! |---|---|---|---|
@@ -7,7 +7,7 @@
 //! | [`essential_8pt`] | N ≥ 8 points | 1 | Longuet-Higgins 1981; Hartley 1997 |
 //! | [`essential_lsq`] | points + ACs, ≥ 8 rows | 1 | least squares, projected to the essential manifold |
 //!
-//! Conventions (DESIGN.md §2): inputs are in normalised coordinates, x̂ = K⁻¹p and
+//! Conventions (docs/design.md §2): inputs are in normalised coordinates, x̂ = K⁻¹p and
 //! Â = K2\[:2,:2\]⁻¹ A K1\[:2,:2\] ([`affcorr_geom::camera::normalize_ac`]); the models satisfy
 //! x̂2ᵀ E x̂1 = 0 with E = \[t\]× R for X2 = R X1 + t, and have unit Frobenius norm (the sign is
 //! arbitrary). Each solver writes into a caller-owned buffer of at least its `*_MAX_SOLUTIONS`

@@ -1,4 +1,4 @@
-//! Fundamental-matrix solvers, p2ᵀ F p1 = 0 in pixels (DESIGN.md §2, §4).
+//! Fundamental-matrix solvers, p2ᵀ F p1 = 0 in pixels (docs/design.md §2, §4).
 //!
 //! | solver | sample | models | method |
 //! |---|---|---|---|
@@ -19,7 +19,7 @@
 //! # Equations (f = F stacked row-major)
 //! - Epipolar constraint: p2ᵀ F p1 = Σᵢⱼ p2ᵢ p1ⱼ Fᵢⱼ = 0 (Hartley & Zisserman, *Multiple View
 //!   Geometry*, 2nd ed., eq. 11.3).
-//! - Affine epipolar constraint (DESIGN.md §2; Bentolila & Francos, "Conic epipolar constraints
+//! - Affine epipolar constraint (docs/design.md §2; Bentolila & Francos, "Conic epipolar constraints
 //!   from affine correspondences", CVIU 2014; Barath et al.), row k ∈ {1, 2}:
 //!   r_k = Σ_{i∈{1,2}} a_ik (F p1)ᵢ + (Fᵀ p2)_k = Σ_{i≤2,j} a_ik p1ⱼ Fᵢⱼ + Σᵢ p2ᵢ F_ik = 0.
 //!

@@ -1,4 +1,4 @@
-//! Homography solvers, p2 ~ H p1 in pixels (DESIGN.md §2, §4).
+//! Homography solvers, p2 ~ H p1 in pixels (docs/design.md §2, §4).
 //!
 //! | solver | sample | models | method |
 //! |---|---|---|---|
@@ -20,7 +20,7 @@
 //! With p = (x, y, 1)ᵀ, hₖ the k-th row of H and w = h₃·p1:
 //! - point (DLT, Hartley & Zisserman, *Multiple View Geometry*, 2nd ed., eq. 4.3):
 //!   h₁·p1 − x2·(h₃·p1) = 0 and h₂·p1 − y2·(h₃·p1) = 0;
-//! - affine (from A = (H\[0:2,0:2\] − x2·H\[2,0:2\]) / w, DESIGN.md §2; Barath & Hajder, "A theory
+//! - affine (from A = (H\[0:2,0:2\] − x2·H\[2,0:2\]) / w, docs/design.md §2; Barath & Hajder, "A theory
 //!   of point-wise homography estimation", PRL 2017, eq. 9): for i, j ∈ {1, 2},
 //!   a_ij·(h₃·p1) − h_ij + x2_i·h_3j = 0.
 //!

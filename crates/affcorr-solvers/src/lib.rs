@@ -1,4 +1,4 @@
-//! Minimal and non-minimal solvers (DESIGN.md §4).
+//! Minimal and non-minimal solvers (docs/design.md §4).
 //!
 //! Module map:
 //! - [`poly`]: real roots of univariate polynomials (Sturm sequences), shared by the solvers.

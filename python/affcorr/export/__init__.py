@@ -1,4 +1,4 @@
-"""ONNX export of pretrained matchers under the contracts of DESIGN.md §6 (docs/matchers.md).
+"""ONNX export of pretrained matchers under the contracts of docs/design.md §6 (docs/matchers.md).
 
 - :mod:`affcorr.export.contracts`: the contract names, :func:`check_model` and a tiny synthetic
   ``dense-warp-v1`` model (no torch);

@@ -1,4 +1,4 @@
-"""The matcher ONNX contracts (DESIGN.md §6) and a checker the runner's Python side can share.
+"""The matcher ONNX contracts (docs/design.md §6) and a checker the runner's Python side can share.
 
 Every matcher model carries the custom metadata key ``affcorr.contract``; the runner picks the
 code path from it. The contracts (docs/matchers.md has the full text):

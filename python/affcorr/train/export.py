@@ -1,4 +1,4 @@
-"""Export the trained shape network to ONNX with the contract of DESIGN.md §6.
+"""Export the trained shape network to ONNX with the contract of docs/design.md §6.
 
     python -m affcorr.train.export --workdir DIR --loss laff -o models/shape.onnx
 
@@ -6,7 +6,7 @@ Contract (``affcorr.contract = shape-v1`` in the metadata):
 - inputs ``patch_a``, ``patch_b``: float32 (N, 1, 32, 32), grayscale in [0, 1], pixel (r, c)
   read bilinearly at ``x + (c - 15.5, r - 15.5)``; the graph normalises each patch itself;
 - outputs ``angle_logits_a``, ``angle_logits_b`` (N, K_theta), ``scale_logits_a``,
-  ``scale_logits_b`` (N, K_s), ``residual_shape`` (N, 3) = A'' (DESIGN.md §2);
+  ``scale_logits_b`` (N, K_s), ``residual_shape`` (N, 3) = A'' (docs/design.md §2);
 - metadata ``angle_bins`` (radians) and ``scale_bins`` (linear factors) as JSON lists, and
   ``decode`` = ``softmax-mean``: O = atan2(sum p sin c, sum p cos c), S = exp(sum p log s),
   then O_AB = O_B - O_A, S_AB = S_B / S_A, A = S_AB R(O_AB) A'(A'').

@@ -1,5 +1,5 @@
 """Fine-tunes XFeat*'s refinement MLP (``fine_matcher``) with its matching loss plus the
-paper's point-consistency loss (§3.3 stage 1; DESIGN.md §3):
+paper's point-consistency loss (§3.3 stage 1; docs/design.md §3):
 
     loss = CE(logits, GT cell) + gamma * L_pc,   L_pc = mean SD_P(refined match; GT F)
 

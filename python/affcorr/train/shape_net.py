@@ -1,6 +1,6 @@
 """The shape network: E_os (orientation and scale per patch) and E_aff (residual shape per pair).
 
-Paper §3.2.2, DESIGN.md §2 and §6. One module, one ONNX graph:
+Paper §3.2.2, docs/design.md §2 and §6. One module, one ONNX graph:
 
     patch_a, patch_b (N, 1, 32, 32) grayscale in [0, 1]
       -> angle_logits_a/b (N, K_theta), scale_logits_a/b (N, K_s), residual_shape (N, 3)
@@ -14,7 +14,7 @@ Paper §3.2.2, DESIGN.md §2 and §6. One module, one ONNX graph:
   O = O_B - O_A, S = S_B / S_A (paper eqs. 4-7).
 - **E_aff** sees patch A and patch B resampled into A's frame by the similarity (O, S) that E_os
   predicted, and regresses the residual shape A'' = (x0, x1, x2). ``1 + x0`` and ``1 + x2`` are
-  exponentials, so A'' is always in the domain of DESIGN.md §2's det-normalisation.
+  exponentials, so A'' is always in the domain of docs/design.md §2's det-normalisation.
 
 Each patch is normalised to zero mean and unit standard deviation inside the graph, so the runner
 feeds raw grayscale; illumination changes that are affine in intensity do not reach the weights.
@@ -229,7 +229,7 @@ def similarity_to_frame_a(
 
 
 class ShapeNet(nn.Module):
-    """E_os + E_aff in the ONNX contract of DESIGN.md §6."""
+    """E_os + E_aff in the ONNX contract of docs/design.md §6."""
 
     def __init__(self, arch: Architecture | str = DEFAULT_ARCHITECTURE) -> None:
         super().__init__()
@@ -255,7 +255,7 @@ class ShapeNet(nn.Module):
 def synthesize_torch(
     orientation: torch.Tensor, scale: torch.Tensor, residual: torch.Tensor
 ) -> torch.Tensor:
-    """A = S R(O) A'(A'') as (N, 2, 2), differentiable (DESIGN.md §2; geom's
+    """A = S R(O) A'(A'') as (N, 2, 2), differentiable (docs/design.md §2; geom's
     ``synthesize_affine`` in torch)."""
     b11, b21, b22 = 1.0 + residual[:, 0], residual[:, 1], 1.0 + residual[:, 2]
     r = torch.rsqrt(b11 * b22)

@@ -1,4 +1,4 @@
-"""Real images used as plane textures for training and validation (DESIGN.md §7).
+"""Real images used as plane textures for training and validation (docs/design.md §7).
 
 Two offline sources, both reachable from a fresh machine:
 

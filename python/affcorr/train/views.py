@@ -1,6 +1,6 @@
 """Patch pairs with exact ground truth, cut from synthetic views of real images.
 
-Two kinds of pairs (DESIGN.md §6, "Training"):
+Two kinds of pairs (docs/design.md §6, "Training"):
 
 - :func:`similarity_pairs` for E_os: patch B is patch A's content rotated by ``phi`` and magnified
   by ``s`` about the same texture point (S3Esti's supervision), so O_B - O_A = phi and
@@ -90,7 +90,7 @@ def _grid(centres: np.ndarray, maps: np.ndarray) -> np.ndarray:
 
 
 def rotation(theta: np.ndarray) -> np.ndarray:
-    """R(theta) = [[cos, -sin], [sin, cos]] per entry, (N, 2, 2) (DESIGN.md §2)."""
+    """R(theta) = [[cos, -sin], [sin, cos]] per entry, (N, 2, 2) (docs/design.md §2)."""
     c, s = np.cos(theta), np.sin(theta)
     return np.stack([np.stack([c, -s], -1), np.stack([s, c], -1)], -2)
 
@@ -154,7 +154,7 @@ class PlanePairs:
 
     patch_a: np.ndarray  # (N, 32, 32) float32
     patch_b: np.ndarray
-    corrs: np.ndarray  # (N, 8) float64: x1, x2, A = dx2/dx1 (DESIGN.md §2)
+    corrs: np.ndarray  # (N, 8) float64: x1, x2, A = dx2/dx1 (docs/design.md §2)
     F: np.ndarray  # (3, 3): p2^T F p1 = 0
     H: np.ndarray  # (3, 3): p2 ~ H p1
 
@@ -279,7 +279,7 @@ def plane_pairs(
     x1, x2, x2c, g1, g2 = x1[keep], x2[keep], x2c[keep], g1[keep], g2[keep]
     pa = texture.sample(g1, _local_shrink(G1i, x1))
     pb = texture.sample(g2, _local_shrink(G2i, x2c))
-    corrs = correspondences_from_homography(H, x1)  # x2 = H(x1), A = dx2/dx1 (DESIGN.md §2)
+    corrs = correspondences_from_homography(H, x1)  # x2 = H(x1), A = dx2/dx1 (docs/design.md §2)
     return PlanePairs(_photometric(rng, pa, 0.5), _photometric(rng, pb, 1.0), corrs, Fm, H)
 
 

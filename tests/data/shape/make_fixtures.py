@@ -6,7 +6,7 @@ Run from the repository root with the `onnx` package installed:
 
 The output is deterministic, so re-running it leaves the committed files unchanged.
 
-`echo.onnx` honours the shape-v1 contract (DESIGN.md §6) with 8 angle bins and 5 scale bins;
+`echo.onnx` honours the shape-v1 contract (docs/design.md §6) with 8 angle bins and 5 scale bins;
 its outputs are slices of the flattened patches, so a test controls every logit exactly:
 
     angle_logits_a = patch_a.flat[:, 0:8]     angle_logits_b = patch_b.flat[:, 0:8]

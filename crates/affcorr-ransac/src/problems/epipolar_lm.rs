@@ -2,7 +2,7 @@
 //! and relative-pose refinements.
 //!
 //! With e = p2ᵀ F p1 and d = (F p1)₁² + (F p1)₂² + (Fᵀ p2)₁² + (Fᵀ p2)₂², the residual is
-//! r = e / √d (so r² = SD_P, DESIGN.md §3) and
+//! r = e / √d (so r² = SD_P, docs/design.md §3) and
 //! ∂r/∂F_mn = p2_m p1_n / √d − e / (2 d^{3/2}) · ∂d/∂F_mn, with
 //! ∂d/∂F_mn = 2 (F p1)_m p1_n [m < 2] + 2 (Fᵀ p2)_n p2_m [n < 2].
 //! A model with tangent basis ∂F/∂θ_k (k < dof) then has Jacobian rows J_k = ⟨∂r/∂F, ∂F/∂θ_k⟩.

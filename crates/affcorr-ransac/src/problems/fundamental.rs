@@ -5,7 +5,7 @@
 //! - Non-minimal fit: the normalised 8-point algorithm on the inliers, from its normal equations
 //!   ([`fundamental_8pt_normal_equations`]), or AC least squares when fewer than 8.
 //! - Residual (px²): the point Sampson distance SD_P, plus, with `affine_weight` λ > 0,
-//!   λ·(SD_A,1 + SD_A,2), the affine Sampson distances of DESIGN.md §3.
+//!   λ·(SD_A,1 + SD_A,2), the affine Sampson distances of docs/design.md §3.
 
 use super::simd::dispatch;
 use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, epipolar_lm};

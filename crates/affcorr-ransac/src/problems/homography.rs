@@ -5,7 +5,7 @@
 //!   from its normal equations ([`homography_lsq_normal_equations`]), or on their ACs when
 //!   fewer than 4.
 //! - Residual (px²): the transfer error ‖x2 − π(H p1)‖², plus, with `affine_weight` λ > 0,
-//!   λ·‖A − A_H(x1)‖²_F, where A_H(x1) is the AC H induces (DESIGN.md §2). λ is in px²: with
+//!   λ·‖A − A_H(x1)‖²_F, where A_H(x1) is the AC H induces (docs/design.md §2). λ is in px²: with
 //!   λ = ρ²/2 the affine term is the mean squared displacement of a circle of radius ρ px mapped
 //!   by A instead of A_H.
 

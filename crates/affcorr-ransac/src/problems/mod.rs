@@ -17,7 +17,7 @@ use affcorr_geom::{AffineCorrespondence, Mat2, Vec2};
 /// sample ([`crate::Problem::sample_support`]): the point residual plus this times the affine
 /// one must be within the inlier threshold². With λ = ρ²/2 the affine term of a homography is
 /// the mean squared displacement of a circle of radius ρ px mapped by A instead of A_H; ρ = 10 px
-/// is about a 32×32 patch's inscribed circle. The affine Sampson error SD_A (DESIGN.md §4) is,
+/// is about a 32×32 patch's inscribed circle. The affine Sampson error SD_A (docs/design.md §4) is,
 /// to first order, the squared error of A along the epipolar constraint's two rows, so the same
 /// λ serves F and E.
 pub(crate) const SEED_AFFINE_WEIGHT: f64 = 50.0;

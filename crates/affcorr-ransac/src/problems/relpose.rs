@@ -1,6 +1,6 @@
 //! Relative pose (calibrated): X2 = R X1 + t from correspondences and intrinsics K1, K2.
 //!
-//! - Minimal samples in normalised coordinates (DESIGN.md §2): 5 points
+//! - Minimal samples in normalised coordinates (docs/design.md §2): 5 points
 //!   ([`relative_pose_5pt`], ≤ 10 poses) or 2 ACs ([`relative_pose_2ac`]); each essential matrix
 //!   is decomposed and only factorisations with the sample in front of both cameras are kept.
 //! - Non-minimal fit: the 8-point essential matrix on the inliers (plus their AC equations when

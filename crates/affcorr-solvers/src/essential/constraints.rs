@@ -6,7 +6,7 @@
 
 use affcorr_geom::{AffineCorrespondence, Vec2};
 
-/// Row of the point constraint p̂2ᵀ E p̂1 = 0 (DESIGN.md §2).
+/// Row of the point constraint p̂2ᵀ E p̂1 = 0 (docs/design.md §2).
 #[inline]
 pub(crate) fn point_row(x1: &Vec2, x2: &Vec2) -> [f64; 9] {
     let (p1, p2) = ([x1.x, x1.y, 1.0], [x2.x, x2.y, 1.0]);
@@ -20,7 +20,7 @@ pub(crate) fn point_row(x1: &Vec2, x2: &Vec2) -> [f64; 9] {
 }
 
 /// The two rows of the affine epipolar constraint Âᵀ (E p̂1)₁:₂ + (Eᵀ p̂2)₁:₂ = 0
-/// (DESIGN.md §2): row k is Σ_{i<2} â_ik (E p̂1)_i + (Eᵀ p̂2)_k, so the coefficient of E_ij is
+/// (docs/design.md §2): row k is Σ_{i<2} â_ik (E p̂1)_i + (Eᵀ p̂2)_k, so the coefficient of E_ij is
 /// [i < 2]·â_ik·p̂1_j + [j = k]·p̂2_i.
 #[inline]
 pub(crate) fn affine_rows(ac: &AffineCorrespondence) -> [[f64; 9]; 2] {

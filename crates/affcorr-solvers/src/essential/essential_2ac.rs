@@ -3,7 +3,7 @@
 //! D. Barath, L. Hajder, "Efficient recovery of essential matrix from two affine
 //! correspondences", IEEE TIP 27(11), 2018.
 //!
-//! 1. Each normalised AC gives three linear equations in E (paper §3; DESIGN.md §2): the point
+//! 1. Each normalised AC gives three linear equations in E (paper §3; docs/design.md §2): the point
 //!    constraint p̂2ᵀ E p̂1 = 0 and the two rows of Âᵀ (E p̂1)₁:₂ + (Eᵀ p̂2)₁:₂ = 0.
 //! 2. Five of the six rows are kept: both point rows, then the three affine rows chosen by a
 //!    pivoted Householder QR (each the most independent of those already taken, rows at unit

@@ -8,7 +8,7 @@
 //! 1. Hartley normalisation: each image's points are translated to their centroid and scaled
 //!    to mean distance √2 (x̃ = T x̂). An AC's Â becomes (s2 / s1)·Â.
 //! 2. Rows p̃2ᵀ Ẽ p̃1 = 0 for points, plus the two affine rows Ãᵀ (Ẽ p̃1)₁:₂ + (Ẽᵀ p̃2)₁:₂ = 0 for
-//!    each AC (DESIGN.md §2), accumulated into the 9×9 normal matrix Σ rᵀr; the solution is its
+//!    each AC (docs/design.md §2), accumulated into the 9×9 normal matrix Σ rᵀr; the solution is its
 //!    eigenvector of least eigenvalue (no N×9 storage, so no heap allocation).
 //! 3. Back to normalised coordinates, E = T2ᵀ Ẽ T1, then the closest essential matrix in
 //!    Frobenius norm (H&Z Thm. 9.19 / §11.1.1): E = U diag(1, 1, 0) Vᵀ / √2.
