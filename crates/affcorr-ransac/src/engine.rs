@@ -863,7 +863,7 @@ fn inlier_mask<P: Problem, S: Scoring>(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::refine::Loss;
+    use crate::loss::Loss;
     use crate::sampler::UniformSampler;
     use crate::score::Msac;
     use rand::Rng;

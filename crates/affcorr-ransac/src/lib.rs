@@ -20,6 +20,7 @@ pub mod engine;
 pub mod error;
 pub mod estimators;
 pub mod graph_cut;
+pub mod loss;
 pub mod options;
 pub mod problem;
 pub mod problems;

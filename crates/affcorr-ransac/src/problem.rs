@@ -4,7 +4,8 @@
 //! minimal and non-minimal solvers, its residual and its refinement. The engine never looks at
 //! the data itself: samplers, scoring and local optimisation vary independently of the problem.
 
-use crate::refine::{LmOptions, Loss};
+use crate::loss::Loss;
+use crate::refine::LmOptions;
 use affcorr_geom::Vec2;
 
 /// A hypothesise-and-verify problem.

@@ -7,75 +7,13 @@
 //! only if the cost decreases (then λ /= 10), else λ *= 10; it stops when the linearised model
 //! promises a relative decrease below the tolerance.
 
-use crate::score::MagsacTable;
+pub use crate::loss::Loss;
 use nalgebra::{SMatrix, SVector};
 
 /// Normal-equation matrix; a problem with d < 9 degrees of freedom uses the top-left d×d block.
 pub type Mat9 = SMatrix<f64, 9, 9>;
 /// Normal-equation vector (top d entries used).
 pub type Vec9 = SVector<f64, 9>;
-
-/// A robust loss ρ(s) of a squared residual s.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Loss {
-    /// ρ(s) = s.
-    Squared,
-    /// ρ(s) = min(s, c²): inliers only (MSAC's cost).
-    Truncated {
-        /// c².
-        threshold_sq: f64,
-    },
-    /// ρ(s) = c² log(1 + s/c²): smooth, so far-away data still pull, weakly.
-    Cauchy {
-        /// c².
-        scale_sq: f64,
-    },
-    /// ρ(s) = τ²·ρ̂(s/τ²), MAGSAC++'s σ-consensus++ loss with largest inlier residual τ
-    /// ([`crate::score::MagsacPlusPlus`]); constant τ² from τ² on.
-    Magsac {
-        /// τ².
-        threshold_sq: f64,
-    },
-}
-
-impl Loss {
-    /// ρ(s).
-    #[inline]
-    pub fn cost(&self, s: f64) -> f64 {
-        match *self {
-            Loss::Squared => s,
-            Loss::Truncated { threshold_sq } => s.min(threshold_sq),
-            Loss::Cauchy { scale_sq } => scale_sq * (s / scale_sq).ln_1p(),
-            Loss::Magsac { threshold_sq } => {
-                threshold_sq * MagsacTable::get().loss(s / threshold_sq)
-            }
-        }
-    }
-
-    /// ρ′(s), the IRLS weight.
-    #[inline]
-    pub fn weight(&self, s: f64) -> f64 {
-        match *self {
-            Loss::Squared => 1.0,
-            Loss::Truncated { threshold_sq } => f64::from(u8::from(s < threshold_sq)),
-            Loss::Cauchy { scale_sq } => 1.0 / (1.0 + s / scale_sq),
-            Loss::Magsac { threshold_sq } => MagsacTable::get().slope(s / threshold_sq),
-        }
-    }
-
-    /// (ρ(s), ρ′(s)), what the least-squares kernels need per datum: one table search for
-    /// MAGSAC++ instead of two.
-    #[inline(always)]
-    pub fn cost_and_weight(&self, s: f64) -> (f64, f64) {
-        match *self {
-            Loss::Magsac { threshold_sq } => {
-                let (loss, slope) = MagsacTable::get().loss_and_slope(s / threshold_sq);
-                (threshold_sq * loss, slope)
-            }
-            _ => (self.cost(s), self.weight(s)),
-        }
-    }
-}
 
 /// A robust nonlinear least-squares problem over a model.
 pub trait LeastSquares {
@@ -342,44 +280,5 @@ mod tests {
         );
         // Stopping early costs less than the promised 0.01 σ² per datum in total.
         assert!(early - exact < 0.01 * exact / 400.0, "{early} vs {exact}");
-    }
-
-    #[test]
-    fn losses_and_weights() {
-        let t = Loss::Truncated { threshold_sq: 4.0 };
-        assert_eq!(
-            (t.cost(1.0), t.cost(9.0), t.weight(1.0), t.weight(9.0)),
-            (1.0, 4.0, 1.0, 0.0)
-        );
-        let c = Loss::Cauchy { scale_sq: 2.0 };
-        assert!(
-            (c.cost(2.0) - 2.0 * 2f64.ln()).abs() < 1e-15 && (c.weight(2.0) - 0.5).abs() < 1e-15
-        );
-        // ρ′ is the derivative of ρ.
-        let h = 1e-6;
-        assert!(((c.cost(1.0 + h) - c.cost(1.0 - h)) / (2.0 * h) - c.weight(1.0)).abs() < 1e-8);
-    }
-
-    #[test]
-    fn cost_and_weight_is_cost_and_weight() {
-        let losses = [
-            Loss::Squared,
-            Loss::Truncated { threshold_sq: 4.0 },
-            Loss::Cauchy { scale_sq: 2.0 },
-            Loss::Magsac { threshold_sq: 2.25 },
-        ];
-        // Inside, at and beyond the threshold, and the residual of a degenerate model.
-        for loss in losses {
-            for s in [0.0, 1e-9, 0.3, 1.7, 2.25, 4.0, 9.0, 1e300, f64::NAN] {
-                let (c, w) = loss.cost_and_weight(s);
-                assert!(
-                    c.to_bits() == loss.cost(s).to_bits()
-                        && w.to_bits() == loss.weight(s).to_bits(),
-                    "{loss:?} at {s}: ({c}, {w}) vs ({}, {})",
-                    loss.cost(s),
-                    loss.weight(s)
-                );
-            }
-        }
     }
 }

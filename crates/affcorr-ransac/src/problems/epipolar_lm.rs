@@ -9,7 +9,8 @@
 
 use super::Correspondences;
 use super::simd::{BLOCK, dispatch, dot};
-use crate::refine::{Loss, Mat9, Vec9};
+use crate::loss::Loss;
+use crate::refine::{Mat9, Vec9};
 use affcorr_geom::Mat3;
 
 /// r and ∂r/∂F (row-major) of one correspondence.

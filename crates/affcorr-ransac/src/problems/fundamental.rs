@@ -9,8 +9,9 @@
 
 use super::simd::dispatch;
 use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, epipolar_lm};
+use crate::loss::Loss;
 use crate::problem::Problem;
-use crate::refine::{LeastSquares, LmOptions, Loss, Mat9, Vec9, levenberg_marquardt};
+use crate::refine::{LeastSquares, LmOptions, Mat9, Vec9, levenberg_marquardt};
 use affcorr_geom::epipolar::skew;
 use affcorr_geom::homography::ac_from_homography;
 use affcorr_geom::sampson::{sampson_affine, sampson_point};

@@ -11,8 +11,9 @@
 
 use super::simd::{BLOCK, dispatch, dot};
 use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below};
+use crate::loss::Loss;
 use crate::problem::Problem;
-use crate::refine::{LeastSquares, LmOptions, Loss, Mat9, Vec9, levenberg_marquardt};
+use crate::refine::{LeastSquares, LmOptions, Mat9, Vec9, levenberg_marquardt};
 use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2};
 use affcorr_solvers::homography::{
     homography_2ac, homography_4pt, homography_ac_lsq, homography_lsq_normal_equations,

@@ -11,8 +11,9 @@
 use super::fundamental::{epipolar_residuals, epipolar_residuals_at, epipolar_seeds};
 use super::{Correspondences, SampleKind, epipolar_lm};
 use crate::engine::LO_SCHEDULE;
+use crate::loss::Loss;
 use crate::problem::Problem;
-use crate::refine::{LeastSquares, LmOptions, Loss, Mat9, Vec9, levenberg_marquardt};
+use crate::refine::{LeastSquares, LmOptions, Mat9, Vec9, levenberg_marquardt};
 use affcorr_geom::camera::{Intrinsics, normalize_ac};
 use affcorr_geom::epipolar::{
     Pose, fundamental_from_essential, pose_from_essential, skew, triangulate_depths,
