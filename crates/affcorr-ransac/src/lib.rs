@@ -20,6 +20,7 @@ pub mod engine;
 pub mod error;
 pub mod estimators;
 pub mod graph_cut;
+mod local_opt;
 pub mod loss;
 pub mod options;
 pub mod problem;
@@ -27,6 +28,8 @@ pub mod problems;
 pub mod refine;
 pub mod sampler;
 pub mod score;
+mod sprt;
+mod verify;
 
 pub use engine::{Estimate, estimate};
 pub use error::{RansacError, Result};

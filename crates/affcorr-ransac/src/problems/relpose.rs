@@ -10,7 +10,7 @@
 
 use super::fundamental::{epipolar_residuals, epipolar_residuals_at, epipolar_seeds};
 use super::{Correspondences, SampleKind, epipolar_lm};
-use crate::engine::LO_SCHEDULE;
+use crate::local_opt::LO_SCHEDULE;
 use crate::loss::Loss;
 use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Mat9, Vec9, levenberg_marquardt};
