@@ -25,6 +25,8 @@ fi
 echo "setup: building and installing affcorr (release build, a few minutes the first time)"
 pip_install() { .venv/bin/python -m pip install -q --disable-pip-version-check -c scripts/constraints.txt "$@"; }
 pip_install ".[test,plot]"
+# The benchmarks and experiments as a package (affcorr_bench, benches/README.md), editable.
+.venv/bin/python -m pip install -q --disable-pip-version-check -e benches --no-deps
 if [ "${AFFCORR_WITH_TORCH:-0}" = 1 ]; then
     # --no-deps: kornia's torch requirement is met by Debian's torch; pip must not fetch PyPI's.
     pip_install --no-deps "kornia==0.7.4" "kornia-rs>=0.1,<0.2"

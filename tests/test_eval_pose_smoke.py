@@ -1,29 +1,20 @@
-"""Experiment 3's core (benches/eval/pose.py, pose_data.py) and the report generator
-(benches/eval/report.py) on tiny inputs: the metrics have their textbook values, a rendered
+"""Experiment 3's core (affcorr_bench.eval.pose, pose_data) and the report generator
+(affcorr_bench.eval.report) on tiny inputs: the metrics have their textbook values, a rendered
 synthetic pair agrees with its own ground truth, the estimators recover an exact scene's pose
 through the peer worker and cache their rows, and the report says "not run yet" for missing
 experiments. No matcher, peer venv or downloaded data is needed."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
-
-EVAL = Path(__file__).resolve().parents[1] / "benches" / "eval"
-sys.path.insert(0, str(EVAL))
-sys.path.insert(0, str(EVAL.parent / "peers"))
-
-import pose  # noqa: E402
-import pose_data  # noqa: E402
-import report  # noqa: E402
-import scenes  # noqa: E402
+from affcorr_bench.common import rotation
+from affcorr_bench.eval import pose, pose_data, report
+from affcorr_bench.peers import scenes
 
 
 def test_metrics():
-    R = scenes.rotation(np.array([0.3, -1.0, 0.2]), np.radians(10.0))
+    R = rotation(np.array([0.3, -1.0, 0.2]), np.radians(10.0))
     assert pose.rotation_error(R, np.eye(3)) == pytest.approx(10.0)
     t = np.array([0.2, -0.5, 1.0])
     assert pose.translation_error(-t, t) == pytest.approx(0.0, abs=1e-6)  # E fixes t up to sign

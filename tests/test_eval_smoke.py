@@ -1,24 +1,15 @@
-"""Smoke test of the evaluation suite (benches/eval): every experiment's core on one small pair
-with a known homography, for each matcher of the registry that runs here (a peer that is not
-installed, see benches/eval/setup.sh, is skipped with its reason)."""
+"""Smoke test of the evaluation suite (affcorr_bench.eval): every experiment's core on one small
+pair with a known homography, for each matcher of the registry that runs here (a peer that is
+not installed, see benches/eval/setup.sh, is skipped with its reason)."""
 
 from __future__ import annotations
-
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 cv2 = pytest.importorskip("cv2", reason="opencv not installed (benches/eval/setup.sh)")
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benches" / "eval"))
 
-import affine  # noqa: E402
-import extreme  # noqa: E402
-import matchers  # noqa: E402
-import matching  # noqa: E402
-
-import data  # noqa: E402
+from affcorr_bench.eval import affine, data, extreme, matchers, matching  # noqa: E402
 
 KEYPOINTS = 256
 

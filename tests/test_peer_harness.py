@@ -1,23 +1,21 @@
-"""The peer benchmark harness (benches/peers): its scenes are exact, its metrics are zero on the
-ground truth, and a one-scene run with the affcorr group writes its CSV, markdown and plots.
-The peers themselves (their venvs) are not needed here."""
+"""The peer benchmark harness (affcorr_bench.peers): its scenes are exact, its metrics are zero
+on the ground truth, and a one-scene run with the affcorr group writes its CSV, markdown and
+plots. The peers themselves (their venvs) are not needed here."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
-from pathlib import Path
 
 import affcorr
 import numpy as np
 import pytest
+from affcorr_bench import common
+from affcorr_bench.common import skew
+from affcorr_bench.peers import methods, run, scenes
 
-PEERS = Path(__file__).resolve().parents[1] / "benches" / "peers"
-sys.path.insert(0, str(PEERS))
-
-import methods  # noqa: E402
-import run  # noqa: E402
-import scenes  # noqa: E402
+#: The harness as a user runs it (benches/ on PYTHONPATH: the package need not be installed).
+RUN = [sys.executable, "-m", "affcorr_bench.peers.run"]
 
 
 @pytest.mark.parametrize("problem", ["homography", "relpose"])
@@ -25,7 +23,7 @@ def test_scenes_are_exact_before_noise(problem):
     s = scenes.make_scene(np.random.default_rng(3), problem, 400, 0.3)
     exact, truth = s["exact"], s["truth"]
     assert truth.sum() == 280 and exact.shape == (400, 8)
-    F = np.linalg.inv(s["K2"]).T @ scenes.skew(s["t"]) @ s["R"] @ np.linalg.inv(s["K1"])
+    F = np.linalg.inv(s["K2"]).T @ skew(s["t"]) @ s["R"] @ np.linalg.inv(s["K1"])
     F /= np.linalg.norm(F)
     assert np.sqrt(affcorr.sampson_point(F, exact)).max() < 1e-6
     assert np.sqrt(affcorr.sampson_affine(F, exact)).max() < 1e-6
@@ -42,7 +40,7 @@ def test_metrics_are_zero_on_the_ground_truth():
     m = run.metrics("relpose", s, dict(R=s["R"], t=s["t"], inliers=s["truth"]))
     assert m["rot_err"] < 1e-6 and m["t_err"] < 1e-5 and m["epi_err"] < 1e-6
     assert m["precision"] == 1.0 and m["recall"] == 1.0
-    F = np.linalg.inv(s["K2"]).T @ scenes.skew(s["t"]) @ s["R"] @ np.linalg.inv(s["K1"])
+    F = np.linalg.inv(s["K2"]).T @ skew(s["t"]) @ s["R"] @ np.linalg.inv(s["K1"])
     m = run.metrics("fundamental", s, dict(F=F, inliers=s["truth"]))
     assert m["rot_err"] < 1e-5 and m["t_err"] < 1e-4
     h = scenes.make_scene(np.random.default_rng(5), "homography", 300, 0.5)
@@ -55,21 +53,22 @@ def test_pose_from_essential_picks_the_true_factorisation():
     s = scenes.make_scene(np.random.default_rng(6), "relpose", 200, 0.0)
     x1n = methods.normalize(s["K1"], s["exact"][:, :2])
     x2n = methods.normalize(s["K2"], s["exact"][:, 2:4])
-    R, t = methods.pose_from_essential(scenes.skew(s["t"]) @ s["R"], x1n, x2n)
+    R, t = methods.pose_from_essential(skew(s["t"]) @ s["R"], x1n, x2n)
     assert run.rot_err(R, s["R"]) < 1e-6 and run.vec_err(t, s["t"]) < 1e-5
 
 
 def test_smoke_run_writes_csv_markdown_and_plots(tmp_path):
     pytest.importorskip("matplotlib")
-    cmd = [sys.executable, str(PEERS / "run.py"), "--smoke", "--groups", "affcorr"]
+    cmd = [*RUN, "--smoke", "--groups", "affcorr"]
     p = subprocess.run(
         [*cmd, "--rounds", "2", "--repeat", "2", "--out", str(tmp_path)],
         capture_output=True,
         text=True,
+        env=common.child_env(),
     )
     assert p.returncode == 0, p.stderr[-2000:]
     md = (tmp_path / "summary.md").read_text()
-    assert "benches/peers/run.py --smoke" in md and "affcorr-AC" in md
+    assert "-m affcorr_bench.peers.run --smoke" in md and "affcorr-AC" in md
     assert "2 rounds that alternate the groups" in md
     assert "2 calls per scene back to back" in md
     rows = (tmp_path / "results.csv").read_text().splitlines()
@@ -80,7 +79,12 @@ def test_smoke_run_writes_csv_markdown_and_plots(tmp_path):
         assert (tmp_path / f"{problem}_error_vs_outliers.png").stat().st_size > 1000
         assert (tmp_path / f"{problem}_time_vs_n.png").stat().st_size > 1000
     # re-rendering from the CSV gives the same report
-    subprocess.run([*cmd, "--out", str(tmp_path), "--report-only"], check=True, capture_output=True)
+    subprocess.run(
+        [*cmd, "--out", str(tmp_path), "--report-only"],
+        check=True,
+        capture_output=True,
+        env=common.child_env(),
+    )
     assert (tmp_path / "summary.md").read_text() == md
 
 
@@ -109,9 +113,7 @@ def test_paired_comparison_counts_the_scenes_where_a_beats_b():
 
 def test_rounds_below_one_are_refused():
     p = subprocess.run(
-        [sys.executable, str(PEERS / "run.py"), "--smoke", "--rounds", "0"],
-        capture_output=True,
-        text=True,
+        [*RUN, "--smoke", "--rounds", "0"], capture_output=True, text=True, env=common.child_env()
     )
     assert p.returncode == 2 and "--rounds must be at least 1" in p.stderr
 

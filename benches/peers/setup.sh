@@ -7,7 +7,9 @@
 #   benches/peers/.venv-gcransac  numpy < 2, pygcransac (its 0.1.1 wheel returns garbage under
 #                                 numpy 2)
 # affcorr and kornia run in the project's .venv (scripts/setup.sh; kornia with Debian's torch).
-# A peer that cannot be installed is recorded in .venv-peers/UNAVAILABLE and reported by run.py.
+# A peer that cannot be installed is recorded in .venv-peers/UNAVAILABLE and reported by
+# affcorr_bench.peers.run. The workers run the package from benches/ (PYTHONPATH): nothing of it
+# is installed in these venvs.
 set -uo pipefail
 cd "$(dirname "$0")"
 PY=${PYTHON:-python3}

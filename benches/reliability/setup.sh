@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Tools of the reliability benchmarks: valgrind (valgrind.sh) and GNU time (peak_memory.py).
+# Tools of the reliability benchmarks: valgrind (valgrind.sh) and GNU time
+# (python -m affcorr_bench.reliability.peak_memory).
 set -eu
 missing=()
 command -v valgrind >/dev/null || missing+=(valgrind)

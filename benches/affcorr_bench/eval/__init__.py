@@ -1,0 +1,1 @@
+"""The evaluation suite: the paper's experiments on data that can be had offline."""

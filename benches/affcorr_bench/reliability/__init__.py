@@ -1,0 +1,1 @@
+"""Reliability benchmarks: leaks over many calls, peak memory at large N."""
