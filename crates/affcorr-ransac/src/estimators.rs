@@ -7,6 +7,7 @@
 
 use crate::engine::{Estimate, estimate};
 use crate::error::{RansacError, Result};
+use crate::local_opt::LO_SCHEDULE;
 use crate::options::RansacOptions;
 use crate::problem::Problem;
 use crate::problems::fundamental::FundamentalProblem;
@@ -163,13 +164,15 @@ pub fn estimate_relative_pose(
     opts: &EstimatorOptions,
 ) -> Result<Estimate<PoseModel>> {
     let kind = sample_kind(data, opts)?;
+    // Cheirality is checked wherever a datum can count as an inlier: below the widest threshold
+    // of local optimisation's schedule.
     let problem = RelativePoseProblem::new(
         data,
         *k1,
         *k2,
         kind,
         opts.affine_weight,
-        opts.ransac.threshold,
+        LO_SCHEDULE[0] * opts.ransac.threshold,
     );
     let mut est = run(&problem, opts, ScoringKind::Magsac)?;
     let idx: Vec<usize> = (0..data.len()).filter(|&i| est.inliers[i]).collect();

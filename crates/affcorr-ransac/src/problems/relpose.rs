@@ -10,7 +10,6 @@
 
 use super::fundamental::{epipolar_residuals, epipolar_residuals_at, epipolar_seeds};
 use super::{Correspondences, SampleKind, epipolar_lm};
-use crate::local_opt::LO_SCHEDULE;
 use crate::loss::Loss;
 use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Mat9, Vec9, levenberg_marquardt};
@@ -54,15 +53,17 @@ pub struct RelativePoseProblem<'a> {
 }
 
 impl<'a> RelativePoseProblem<'a> {
-    /// `pixels` with intrinsics `k1`, `k2`, sampled as `kind`, scored with `affine_weight`, for
-    /// the inlier `threshold` (px) of the run.
+    /// `pixels` with intrinsics `k1`, `k2`, sampled as `kind`, scored with `affine_weight`; the
+    /// data whose residual is below `cheirality_threshold` (px) are checked for cheirality. The
+    /// estimators pass the widest threshold the run's local optimisation uses (a multiple of the
+    /// inlier threshold), so that every datum that can count as an inlier at any step is checked.
     pub fn new(
         pixels: &'a Correspondences,
         k1: Intrinsics,
         k2: Intrinsics,
         kind: SampleKind,
         affine_weight: f64,
-        threshold: f64,
+        cheirality_threshold: f64,
     ) -> Self {
         let normalized = if pixels.has_affine() {
             let acs: Vec<AffineCorrespondence> = (0..pixels.len())
@@ -87,7 +88,7 @@ impl<'a> RelativePoseProblem<'a> {
             k2,
             kind,
             affine_weight,
-            cheirality_cap_sq: (LO_SCHEDULE[0] * threshold).powi(2),
+            cheirality_cap_sq: cheirality_threshold.powi(2),
         }
     }
 
@@ -103,8 +104,9 @@ impl<'a> RelativePoseProblem<'a> {
 
     /// Sets the squared residual `r2` of datum `i` to +∞ when the point it triangulates to lies
     /// behind either camera: such a correspondence can satisfy the epipolar constraint but not
-    /// the pose (PoseLib's relative-pose score checks the same). Only data that could count as
-    /// inliers anywhere (below the widest threshold of local optimisation) pay for the check. Parallel rays (points at infinity) pass.
+    /// the pose (PoseLib's relative-pose score checks the same). Only data below the cheirality
+    /// threshold of [`RelativePoseProblem::new`] pay for the check. Parallel rays (points at
+    /// infinity) pass.
     #[inline(always)]
     fn behind_is_outlier(&self, m: &PoseModel, i: usize, r2: &mut f64) {
         if *r2 < self.cheirality_cap_sq
@@ -303,7 +305,7 @@ mod tests {
             a: Vec::new(),
         };
         let problem =
-            RelativePoseProblem::new(&data, scene.k1, scene.k2, SampleKind::Points, 0.0, 1.0);
+            RelativePoseProblem::new(&data, scene.k1, scene.k2, SampleKind::Points, 0.0, 8.0);
         let model = problem.model(scene.pose);
         let mut r = [0.0; 2];
         problem.residuals(&model, 0, &mut r);
