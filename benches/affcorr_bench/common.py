@@ -93,6 +93,15 @@ def md_table(columns: list[str], rows: list[list]) -> list[str]:
     ]
 
 
+def save_figure(fig, path: Path, dpi: int = 110) -> None:
+    """A matplotlib figure, laid out tight, into ``path``; the figure is closed."""
+    import matplotlib.pyplot as plt
+
+    fig.tight_layout()
+    fig.savefig(path, dpi=dpi)
+    plt.close(fig)
+
+
 def load_average() -> tuple[float, float, float]:
     """os.getloadavg(), or NaNs where the platform has none."""
     return os.getloadavg() if hasattr(os, "getloadavg") else (float("nan"),) * 3

@@ -236,8 +236,7 @@ def plot(rows, out: Path):
     ax.set_ylabel("fraction of correct matches")
     ax.set_title("Affine accuracy (all pairs)")
     ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(out.with_suffix(".png"), dpi=110)
+    common.save_figure(fig, out.with_suffix(".png"))
 
 
 def main(argv=None):

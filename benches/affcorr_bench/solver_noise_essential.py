@@ -155,8 +155,7 @@ def main(argv=None):
         ax.set_title(f"{sweep} noise ({TRIALS} trials/level, best candidate)")
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(OUT / "solver_noise_essential.png", dpi=110)
+    common.save_figure(fig, OUT / "solver_noise_essential.png")
     print(f"wrote {path} and the .png")
 
 

@@ -146,9 +146,7 @@ def plot(rows: list[dict], labels: list[str], tilts, path: Path) -> None:
         ax.set_xticks(list(tilts))
         ax.grid(alpha=0.3)
     a.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    common.save_figure(fig, path)
 
 
 def main(argv=None) -> None:

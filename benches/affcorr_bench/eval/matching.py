@@ -109,9 +109,7 @@ def plot(summary: dict, names: list[str], path) -> None:
     axes[0].set_ylabel("MMA")
     axes[0].set_ylim(0, 1)
     axes[-1].legend(fontsize=8, loc="lower right")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    common.save_figure(fig, path)
 
 
 def main(argv=None) -> None:
