@@ -28,10 +28,11 @@
 //! ρ = 8 px, which makes their residuals commensurate with the point rows' (an error ε in A moves
 //! points at distance ρ by ε·ρ); exact data is unaffected, noisy estimates improve about 3×.
 
-use crate::normalization::{
-    AFFINE_ROW_RADIUS_PX, Gram9, Lsq9, NullSpace, Similarity, Vec9, cofactor, gauss_jordan,
-    mat3_from_vec9, null_vector, smallest_singular3, unit_frobenius, valid_indexed_input,
+use crate::linalg::{
+    Gram9, Lsq9, NullSpace, Vec9, cofactor, gauss_jordan, mat3_from_vec9, null_vector,
+    smallest_singular3, unit_frobenius,
 };
+use crate::normalization::{AFFINE_ROW_RADIUS_PX, Similarity, valid_indexed_input};
 use crate::poly::real_roots;
 use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2};
 

@@ -30,10 +30,8 @@
 //! rows' (an error ε in A moves points at distance ρ by ε·ρ); exact data is unaffected, noisy
 //! estimates improve about 3× against unweighted rows.
 
-use crate::normalization::{
-    AFFINE_ROW_RADIUS_PX, Lsq9, Similarity, householder_fold, mat3_from_vec9, smallest_singular3,
-    unit_frobenius, valid_indexed_input,
-};
+use crate::linalg::{Lsq9, householder_fold, mat3_from_vec9, smallest_singular3, unit_frobenius};
+use crate::normalization::{AFFINE_ROW_RADIUS_PX, Similarity, valid_indexed_input};
 use affcorr_geom::{AffineCorrespondence, Mat3, Vec2, Vec3};
 
 /// Most models [`homography_4pt`] returns.
