@@ -333,8 +333,8 @@ where
 const FINAL_LM_ITERATIONS: usize = 100;
 /// The final refinement's [`LmOptions::noise_fraction`]: it stops once a step would move the
 /// model by less than √0.001 ≈ 0.03 standard errors. From a linear fit (H: no LM inside LO)
-/// the default 0.01 raised the median H error over 200 profile scenes by 1.5% (0.0357 →
-/// 0.0362 px); 0.001 costs one more normal-equation pass on the inliers.
+/// the default 0.01 stopped early enough to raise the median H error over the profile scenes
+/// (benches/results/ransac.md); 0.001 costs one more normal-equation pass on the inliers.
 const FINAL_NOISE_FRACTION: f64 = 0.001;
 /// Most refine-and-recollect rounds of the final refinement.
 const FINAL_ROUNDS: usize = 4;

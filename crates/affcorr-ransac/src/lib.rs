@@ -4,13 +4,19 @@
 //! Module map (the axes vary independently, as in kornia-rs's `ransac`):
 //! - [`problem`]: the [`Problem`] trait: data, minimal/non-minimal solvers, residuals, refinement.
 //! - [`sampler`]: uniform and PROSAC sampling.
-//! - [`score`]: MSAC and MAGSAC++ scoring with an exact bail-out.
-//! - [`graph_cut`]: inlier labelling by a minimum cut with spatial coherence (GC-RANSAC's
-//!   local optimisation).
+//! - [`score`]: MSAC and MAGSAC++ scoring, the [`score::Scoring`] trait.
+//! - [`loss`]: the robust losses of the refinements and the tabulated MAGSAC++ loss (its
+//!   closed form).
 //! - [`refine`]: Levenberg–Marquardt with robust losses, used by local optimisation and the
 //!   final refinement.
-//! - [`engine`]: the loop: adaptive termination, the SPRT, local optimisation, final
-//!   refinement.
+//! - [`graph_cut`]: inlier labelling by a minimum cut with spatial coherence (GC-RANSAC's
+//!   local optimisation).
+//! - [`engine`]: the loop: sampling, verification, adaptive termination, final refinement.
+//! - `verify` (private): one hypothesis scored over all data with an exact bail-out, the
+//!   residual cache, inlier collection.
+//! - `sprt` (private): Wald's sequential probability ratio test of a hypothesis.
+//! - `local_opt` (private): local optimisation: the threshold schedule, iterated least squares,
+//!   the graph-cut glue.
 //! - [`options`]: [`RansacOptions`] with documented defaults.
 //! - [`error`]: the typed error, [`RansacError`].
 //! - [`problems`]: homography, fundamental matrix and relative pose, with point or AC samples.

@@ -23,7 +23,7 @@ const LO_MIN_GAIN: f64 = 0.005;
 /// Levenberg–Marquardt steps per refinement inside local optimisation: each schedule step starts
 /// where the last one ended, so a few steps per threshold suffice to leave a rough minimal
 /// model's basin (5 instead of 3 changed no median error over the profile example's scenes and
-/// cost 15–30% more).
+/// cost more: benches/results/ransac.md).
 pub(crate) const LO_LM_ITERATIONS: usize = 3;
 /// Local optimisation refines with Levenberg–Marquardt only at steps whose threshold is at most
 /// this multiple of the true one; the wider first steps take the linear fit alone.
@@ -31,7 +31,8 @@ const LO_LM_MAX_SCALE: f64 = 2.0;
 
 /// Local optimisation fits on at most this many inliers (an even stride through them): enough
 /// to pin a model with ≤ 9 degrees of freedom (LO only has to find the basin and the inlier
-/// set; 512 gave the same median errors at 1.3–1.4× the cost), and it keeps LO's cost
+/// set; 512 gave the same median errors at a higher cost, benches/results/ransac.md), and it
+/// keeps LO's cost
 /// independent of N. The score is still computed on all data, and the final refinement uses
 /// all inliers.
 const LO_MAX_FIT: usize = 256;
@@ -101,9 +102,9 @@ pub(crate) fn local_optimization<P: Problem, S: Scoring>(
             })
             .flatten();
         // The linear fit at every step, beside LM: LM's few steps from a rough 2-AC model can
-        // stall in a wrong basin on real data (graffiti 1→3 with learned ACs: H corner error
-        // 2–6.6 px on 6 of 8 seeds at 2 px with the linear fit on the first step only, 0.8 px on
-        // all seeds with it at every step; tests/test_pipeline.py).
+        // stall in a wrong basin on real data (graffiti 1→3 with learned ACs, with the linear fit
+        // on the first step only: tests/test_pipeline.py; the errors with and without it are in
+        // benches/results/ransac.md).
         let linear = problem.fit_nonminimal(indices, Some(weights));
         let start_score = best.score;
         for model in refined.into_iter().chain(linear) {

@@ -45,8 +45,8 @@ pub struct RansacOptions {
     /// "bad" to "good" exceeds the threshold A that minimises the expected run time; ε and δ
     /// are estimated as the run goes, and the iteration bound accounts for the good hypotheses
     /// the test rejects (probability ≈ 1/A). Default true: over 20 seeded scenes per problem
-    /// and sample kind it finds models as accurate as without it (tests/scoring_sprt.rs) from
-    /// 17–77% of the residuals.
+    /// and sample kind it finds models as accurate as without it from a fraction of the
+    /// residuals (tests/scoring_sprt.rs; run times in benches/results/ransac.md).
     pub sprt: bool,
 }
 

@@ -86,10 +86,9 @@ pub trait Problem: Sync {
     /// ([`Problem::fit_nonminimal`]) at its narrow steps. Default true. A problem whose linear
     /// fit on the inliers already lands in the final refinement's basin can skip it: LO only
     /// has to find the inlier set, and the final refinement does the geometric fit. (The
-    /// fundamental matrix cannot: without LM inside LO, 22% fewer instructions per run, one of
-    /// 30 peer-harness scenes at 50% outliers ended in an F that leaves out a plane, recall
-    /// 0.84 and 2° rotation error; one refining LO on the best model instead fixed that scene
-    /// and lost 5 of 400 inliers on another.)
+    /// fundamental matrix cannot: without LM inside LO, a peer-harness scene at 50% outliers
+    /// ended in an F that leaves out a plane, and one refining LO on the best model instead
+    /// fixed that scene but lost inliers on another; benches/results/ransac.md.)
     fn lo_refines(&self) -> bool {
         true
     }

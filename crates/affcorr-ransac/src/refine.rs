@@ -42,8 +42,8 @@ pub struct LmOptions {
     /// Most iterations (accepted or rejected steps). Default 25.
     pub max_iterations: usize,
     /// Stop when the relative cost decrease falls below this. Default 1e-6: the model then moves
-    /// by ~1e-3 of its standard error, far below the noise (1e-10 cost pose and F runs 20% more
-    /// for no measurable gain).
+    /// by ~1e-3 of its standard error, far below the noise (1e-10 made pose and F runs slower
+    /// for no measurable gain: benches/results/ransac.md).
     pub cost_tolerance: f64,
     /// Stop when ‖δ‖ falls below this. Default 1e-10.
     pub step_tolerance: f64,

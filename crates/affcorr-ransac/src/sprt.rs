@@ -184,7 +184,7 @@ impl Sprt {
 /// A seeded permutation of 0..n that spreads neighbours of the input far apart: k ↦ (a + k·b)
 /// mod n with b coprime to n near n/φ (golden-ratio stepping), from a random start a. As good
 /// as a shuffle for the SPRT, which only needs early data to represent all (inputs sorted by
-/// plane or by matcher score), and 10× cheaper than Fisher–Yates (one draw instead of n).
+/// plane or by matcher score), and cheaper than Fisher–Yates: one draw instead of n.
 fn visiting_order(n: usize, rng: &mut Pcg64) -> Vec<usize> {
     if n < 2 {
         return (0..n).collect();

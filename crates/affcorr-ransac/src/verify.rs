@@ -39,8 +39,8 @@ pub(crate) struct Evaluation {
 /// Every complete [`for_each_block`] pass leaves all residuals in `latest`; [`Scratch::keep`]
 /// moves them to `kept` when that model becomes the one local optimisation or the final
 /// refinement goes on from, so that their next inlier collection (and the final inlier mask)
-/// read them instead of recomputing: 8% of a homography run's instructions. `buf` is the SPRT's
-/// block buffer.
+/// read them instead of recomputing (the instructions it saves: benches/results/ransac.md).
+/// `buf` is the SPRT's block buffer.
 pub(crate) struct Scratch<M> {
     pub(crate) buf: Vec<f64>,
     pub(crate) evaluations: u64,

@@ -121,8 +121,8 @@ impl Problem for HomographyProblem<'_> {
     fn fit_nonminimal(&self, indices: &[usize], _weights: Option<&[f64]>) -> Option<Mat3> {
         let mut h = [Mat3::zeros(); 1];
         let n = if indices.len() >= 4 {
-            // The normal equations: LO fits hundreds of points many times per run (the QR
-            // of the 2N×9 system was a fifth of all instructions of a homography run).
+            // The normal equations: LO fits hundreds of points many times per run, and the QR
+            // of the 2N×9 system was a large share of a homography run (benches/results/ransac.md).
             homography_lsq_normal_equations(&self.data.x1, &self.data.x2, indices, None, &mut h)
         } else if self.data.has_affine() {
             let acs: Vec<AffineCorrespondence> = indices.iter().map(|&i| self.data.ac(i)).collect();
@@ -173,7 +173,8 @@ impl Problem for HomographyProblem<'_> {
     }
 
     /// The normalised DLT on the inliers is close to the transfer-error optimum: LM inside LO
-    /// changed no median error over 200 profile scenes and was 20% of a run's instructions.
+    /// changed no median error over the profile scenes and was a large share of a run's
+    /// instructions (benches/results/ransac.md).
     fn lo_refines(&self) -> bool {
         false
     }
