@@ -4,7 +4,7 @@
 //! |---|---|---|---|
 //! | [`fundamental_7pt`] | 7 points | ≤ 3 | 2-dim null space + cubic det(F₁ + xF₂) = 0 |
 //! | [`fundamental_8pt`] | N ≥ 8 points | ≤ 1 | normalised 8-point, rank 2 enforced |
-//! | [`fundamental_8pt_normal_equations`] | N ≥ 8 points, weighted | ≤ 1 | the same from the normal equations, 8× cheaper |
+//! | [`fundamental_8pt_normal_equations`] | N ≥ 8 points, weighted | ≤ 1 | the same from the normal equations, cheaper (local optimisation's fit) |
 //! | [`fundamental_3ac`] | 3 ACs | ≤ 3 (1 generically) | 9 linear equations + rank 2 |
 //! | [`fundamental_ac_lsq`] | N ≥ 3 ACs | ≤ 1 | the 3AC system over N ACs, least squares |
 //!
@@ -115,7 +115,8 @@ pub fn fundamental_8pt(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
 
 /// [`fundamental_8pt`] on the data `indices` of `x1`, `x2`, optionally weighted (row i scaled
 /// by √wᵢ), from the normal equations MᵀWM (45 products per datum) instead of a QR of the N×9
-/// system: about 8× fewer instructions per datum. The Gram matrix squares the condition number,
+/// system (the saving in a RANSAC run: benches/results/ransac.md). The Gram matrix squares the
+/// condition number,
 /// harmless in Hartley-normalised coordinates; use it where the fit runs often on many points
 /// (local optimisation). Weights must be finite and ≥ 0.
 ///

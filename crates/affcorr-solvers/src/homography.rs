@@ -6,7 +6,7 @@
 //! | [`homography_2ac`] | 2 ACs | ≤ 1 | 12 linear equations (2 point + 4 affine per AC), LSQ |
 //! | [`homography_1ac_given_f`] | 1 AC + F | ≤ 1 | H = −\[e₂\]×F + e₂vᵀ, 6 linear equations in v |
 //! | [`homography_lsq`] | N ≥ 4 points | ≤ 1 | normalised DLT, least squares |
-//! | [`homography_lsq_normal_equations`] | N ≥ 4 points, weighted | ≤ 1 | the same from the normal equations, 5× cheaper |
+//! | [`homography_lsq_normal_equations`] | N ≥ 4 points, weighted | ≤ 1 | the same from the normal equations, cheaper (local optimisation's fit) |
 //! | [`homography_ac_lsq`] | N ≥ 2 ACs | ≤ 1 | the 2AC system over N ACs, least squares |
 //!
 //! All solvers take pixels, apply Hartley's isotropic normalisation internally
@@ -208,7 +208,8 @@ pub fn homography_lsq(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
 /// With p = (x̂1, ŷ1, 1) and q = x̂2 normalised, the two DLT rows of a pair are [pᵀ, 0, −q_x pᵀ]
 /// and [0, pᵀ, −q_y pᵀ], so MᵀWM has four distinct 3×3 blocks, all weighted sums of ppᵀ:
 /// S = Σw ppᵀ (twice on the diagonal), −Σw q_x ppᵀ, −Σw q_y ppᵀ and Σw ‖q‖² ppᵀ: 24 sums per
-/// pair instead of folding 2 rows of 9 (≈ 5× fewer instructions per pair). The Gram matrix
+/// pair instead of folding 2 rows of 9 (the saving in a RANSAC run: benches/results/ransac.md).
+/// The Gram matrix
 /// squares the condition number, harmless in Hartley-normalised coordinates (κ(M) ≲ 10³): use
 /// it where the fit runs often on many points (local optimisation), [`homography_lsq`] where
 /// the last digits matter. Weights must be finite and ≥ 0.
@@ -382,7 +383,7 @@ fn affine_rows(p: &Vec2, q: &Vec2, a: &affcorr_geom::Mat2) -> [[f64; 9]; 4] {
 /// This is the least-squares solution under ‖h₃‖ = 1 instead of ‖h‖ = 1, the same for exact
 /// data; h₃ = 0 would put every point on the line at infinity. 3×3 algebra instead of a 9×9
 /// null space: the 2-AC sample is solved once per RANSAC iteration, and the 9×9 inverse
-/// iteration was 12% of a homography run's instructions.
+/// iteration was a large share of a homography run (benches/results/ransac.md).
 ///
 /// The null space of the system is one-dimensional exactly when S has rank 2, which
 /// `smallest_singular3` tests (σ₂(S) > [`REDUCED_RANK_TOL`]·σ₁(S)).

@@ -113,7 +113,8 @@ pub(crate) fn null_vector<const R: usize, const C: usize>(
 ///   re-triangularised by Householder reflections it is an (n−1)×(n−1) triangular factor with the
 ///   remaining singular values, and inverse iteration runs again.
 ///
-/// All of it is O(9²) per step on the stack: about 10× faster than nalgebra's 9×9 SVD, with the
+/// All of it is O(9²) per step on the stack: much faster than nalgebra's 9×9 SVD (timings of
+/// both in benches/results/solvers_hf.md), with the
 /// same accuracy on the smallest singular vector (backward-stable solves, no squaring of M).
 #[derive(Debug, Clone)]
 pub(crate) struct Lsq9 {

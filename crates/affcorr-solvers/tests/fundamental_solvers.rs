@@ -1,5 +1,5 @@
 //! Fundamental-matrix solvers on exact plane-induced data (K1 ≠ K2, fx ≠ fy), with noise, and on
-//! degenerate samples (issue #3).
+//! degenerate samples (which must give no model, not a wrong one).
 //!
 //! F cannot be recovered from a single plane (any F = [e₂]×H fits), so every correspondence here
 //! is induced by its own random plane, seen by the same two cameras: each is an exact AC of that

@@ -1,5 +1,5 @@
 //! Homography solvers on exact plane-induced data (K1 ≠ K2, fx ≠ fy), with noise, and on
-//! degenerate samples (issue #3).
+//! degenerate samples (which must give no model, not a wrong one).
 
 mod common;
 use affcorr_geom::synthetic::PlaneScene;

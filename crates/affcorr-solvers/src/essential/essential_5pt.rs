@@ -28,10 +28,10 @@
 //!
 //! No heap allocation: every array lives on the stack.
 //!
-//! Cost (callgrind, 64 one-plane samples cycled, `benches/results/solvers_essential.md`):
-//! ≈ 50k instructions per call, of which ≈ 19k root isolation and refinement
-//! ([`crate::poly::real_roots`]), ≈ 6k the ten cubics, ≈ 5k the Gauss–Jordan elimination,
-//! ≈ 6k the polish. The residuals and Jacobian of the polish are evaluated lane-parallel over
+//! Cost: `benches/results/solvers_essential.md` (callgrind, 64 one-plane samples cycled) breaks
+//! the instructions per call down; root isolation and refinement ([`crate::poly::real_roots`])
+//! is the largest part, then the ten cubics, the Gauss–Jordan elimination and the polish. The
+//! residuals and Jacobian of the polish are evaluated lane-parallel over
 //! the ten constraints (coefficients transposed by monomial, derivative zeros skipped), and
 //! the elimination updates rows in place, only on the columns still read.
 
