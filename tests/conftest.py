@@ -1,7 +1,8 @@
 """Shared fixtures: exact plane-induced scenes built in numpy, independently of the Rust code.
 
 A plane n^T X1 = d seen by two cameras with X2 = R X1 + t induces H = K2 (R + t n^T / d) K1^-1
-and F = K2^-T [t]x R K1^-1 (docs/design.md §2). K1 != K2 and fx != fy, so a wrong normalisation shows.
+and F = K2^-T [t]x R K1^-1 (docs/design.md §2). K1 != K2 and fx != fy, so a wrong normalisation
+shows.
 """
 
 from __future__ import annotations

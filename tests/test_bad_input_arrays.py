@@ -1,4 +1,4 @@
-"""Bad-input battery over every array-taking function of the Python API (issue 8).
+"""Bad-input battery over every array-taking function of the Python API.
 
 One table (``SPECS``) lists each public function with valid arguments; every input class of the
 issue is applied to every array argument in turn:

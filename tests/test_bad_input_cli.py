@@ -1,4 +1,4 @@
-"""Bad-input battery of the command line (issue 8): every subcommand given bad arguments exits
+"""Bad-input battery of the command line: every subcommand given bad arguments exits
 with status 2 and one line ``affcorr <command>: <problem>`` on stderr, never a traceback.
 
 Runs ``cli.main`` in-process (an uncaught exception would fail the test, so "no traceback" is

@@ -1,4 +1,4 @@
-"""Bad-input battery for files (issue 8): images, ONNX models and the ONNX Runtime library.
+"""Bad-input battery for files: images, ONNX models and the ONNX Runtime library.
 
 Every image-taking entry point (``read_gray_image``, ``extract_patches``,
 ``ShapeEstimator.estimate``, ``Pipeline.match_pair``) gets the same files: truncated PNG/JPEG,

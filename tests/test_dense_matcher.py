@@ -1,4 +1,5 @@
-"""The dense-matcher path (dense-warp-v1, docs/design.md §6) with a test model whose warp is graffiti's
+"""The dense-matcher path (dense-warp-v1, docs/design.md §6) with a test model whose warp is
+graffiti's
 ground-truth homography (affcorr.export.dense_test_model, written to the test's tmp dir).
 
 - The contract checker accepts the model and rejects broken variants.

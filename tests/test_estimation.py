@@ -1,4 +1,4 @@
-"""Robust estimation from Python (issue #4): affcorr.estimate_{homography,fundamental,
+"""Robust estimation from Python: affcorr.estimate_{homography,fundamental,
 relative_pose} and their _batch forms.
 
 Scenes come from tests/conftest.py (planes seen by two cameras, K1 != K2, fx != fy). F and the

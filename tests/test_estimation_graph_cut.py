@@ -1,4 +1,4 @@
-"""Graph-cut local optimisation from Python (issue #4): ``lo="graph_cut"``.
+"""Graph-cut local optimisation from Python: ``lo="graph_cut"``.
 
 The scenes are test_estimation.py's (50% outliers, sigma = 0.5 px); graph-cut LO must find
 models as accurate and inlier sets as complete as the default IRLS LO, deterministically.

@@ -1,4 +1,5 @@
-"""kornia LAF interop, with the orientation sign checked on a rotated real image (docs/design.md §2).
+"""kornia LAF interop, with the orientation sign checked on a rotated real image (docs/design.md
+§2).
 
 kornia builds its LAF rotation as [[cos, sin], [-sin, cos]], so its angle is the negative of our
 orientation. Reading it the wrong way round would give A = R(-phi) instead of R(phi) here.

@@ -1,7 +1,8 @@
 """Memory and concurrency (docs/reliability.md, "Memory and concurrency").
 
 - No leaks: 10^4 calls of each main API (2 x 10^3 of ShapeEstimator.estimate, whose ONNX
-  Runtime run costs ~1 ms; benches/reliability/leak_check.py runs 10^4 of it) in a fresh
+  Runtime run costs ~1 ms; python -m affcorr_bench.reliability.leak_check runs 10^4 of it) in a
+  fresh
   subprocess, after a warm-up, grow its resident set by less than LEAK_BOUND_MIB: a leak of
   ~200 bytes per call would show, and the smallest result, a 3x3 matrix with its info dict,
   is larger.

@@ -1,4 +1,4 @@
-"""Homography and fundamental-matrix solver bindings (issue #3).
+"""Homography and fundamental-matrix solver bindings.
 
 Ground truth is built here in numpy, independently of the Rust scene generator: two cameras with
 K1 != K2 and fx != fy, planes n^T X1 = d, H = K2 (R + t n^T / d) K1^-1, F = K2^-T [t]x R K1^-1,

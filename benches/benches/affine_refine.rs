@@ -1,4 +1,4 @@
-//! Throughput of the affine Lucas–Kanade refinement (`affcorr::runner::refine_affine`), ACs per
+//! Throughput of the affine Lucas–Kanade refinement (`affcorr::image::refine_affine`), ACs per
 //! second, default options (33×33 window, blur σ = 3 / 1.5 / 0.75 px), in a rayon pool of 2
 //! threads.
 //!
@@ -16,7 +16,7 @@
 use std::hint::black_box;
 use std::time::Duration;
 
-use affcorr::runner::{AffineRefineOptions, GrayImage, refine_affine};
+use affcorr::image::{AffineRefineOptions, GrayImage, refine_affine};
 use criterion::{Criterion, Throughput};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;

@@ -1,5 +1,5 @@
 //! Throughput of the batched geometry kernels and the machine's attainable memory bandwidth,
-//! measured in the same run so that the two can be compared (issue #2, item 8).
+//! measured in the same run so that the two can be compared.
 //!
 //! Benchmark ids are `<kernel>/t<threads>/<N>`; every kernel runs inside a local rayon pool of
 //! 1 thread and of all cores. Below `batch::PARALLEL_MIN_LEN` rows the kernels stay on the
@@ -9,7 +9,7 @@
 //! loops: once on arrays far larger than the last-level cache (DRAM bandwidth), once on a
 //! footprint like that of a kernel at N = 10⁶ (which may be served partly by L3).
 //!
-//! `benches/scripts/geom_table.py` turns criterion's output into `benches/results/geom.md`;
+//! `python -m affcorr_bench.geom_table` turns criterion's output into `benches/results/geom.md`;
 //! the bytes per row that it charges each kernel are listed there next to the table.
 
 use std::hint::black_box;

@@ -15,12 +15,11 @@
 //! ```
 
 use std::hint::black_box;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
-use affcorr::runner::{
-    GrayImage, ShapeEstimator, ShapeModel, ShapeModelOptions, extract_patches, init_ort,
-};
+use affcorr::image::{GrayImage, extract_patches};
+use affcorr::runner::{ShapeEstimator, ShapeModel, ShapeModelOptions, init_ort};
 use criterion::{Criterion, Throughput};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -29,17 +28,12 @@ const PAIRS: usize = 512;
 const THREADS: usize = 2;
 
 fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+    affcorr_devtools::repo_root()
 }
 
-/// `$ORT_DYLIB_PATH`, else `.venv/lib/python3*/site-packages/onnxruntime/capi/libonnxruntime.so*`.
+/// `$ORT_DYLIB_PATH`, else the onnxruntime wheel's library under `.venv`.
 fn ort_library() -> PathBuf {
-    affcorr::runner::ort_env::locate_library(&root()).unwrap_or_else(|| {
-        panic!(
-            "set ORT_DYLIB_PATH (no onnxruntime wheel under {})",
-            root().join(".venv/lib").display()
-        )
-    })
+    affcorr_devtools::ort_library()
 }
 
 /// A smooth random image (a sum of a few sinusoids plus noise), `w × h`.

@@ -1,4 +1,4 @@
-//! ns/call of the essential-matrix solvers and relative-pose wrappers (issue #3) on exact
+//! ns/call of the essential-matrix solvers and relative-pose wrappers on exact
 //! samples.
 //!
 //! Each benchmark cycles through 64 precomputed exact samples of different random plane scenes

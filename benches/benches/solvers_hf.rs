@@ -1,4 +1,4 @@
-//! ns/call of the homography and fundamental-matrix solvers (issue #3) on exact samples.
+//! ns/call of the homography and fundamental-matrix solvers on exact samples.
 //!
 //! Each benchmark cycles through 64 precomputed exact samples of different random scenes
 //! (anisotropic K1 ≠ K2; for F every correspondence lies on its own plane), so branch predictors

@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # Valgrind memcheck over Rust test binaries that call the estimators (affcorr-ransac
 # tests/determinism.rs: every estimate_* and _batch form under rayon pools of 1, 2, 4 threads)
-# and the runner (affcorr-runner tests/shape_model.rs and tests/images.rs: ONNX Runtime
+# and the runner and images (affcorr-runner tests/shape_model.rs, affcorr-image tests/images.rs: ONNX Runtime
 # sessions, inference, contract checks, image decoding). Prints each binary's LEAK SUMMARY and
 # ERROR SUMMARY; the figures go to docs/reliability.md. Slow (tens of minutes): not run in CI.
 #
 #   bash benches/reliability/valgrind.sh [PACKAGE:TEST[:FILTER]...]   (from the repository root)
 #
-# Without arguments: affcorr-ransac:determinism affcorr-runner:shape_model affcorr-runner:images.
+# Without arguments: affcorr-ransac:determinism affcorr-runner:shape_model affcorr-image:images.
 # FILTER is passed to the test binary (a test-name substring).
 #
 # Needs valgrind (apt-get install valgrind; setup.sh in this folder does it) and .venv's
@@ -28,7 +28,7 @@ for line in sys.stdin:
         print(m["executable"])' | tail -1
 }
 specs=("$@")
-[ ${#specs[@]} -gt 0 ] || specs=(affcorr-ransac:determinism affcorr-runner:shape_model affcorr-runner:images)
+[ ${#specs[@]} -gt 0 ] || specs=(affcorr-ransac:determinism affcorr-runner:shape_model affcorr-image:images)
 for spec in "${specs[@]}"; do
     IFS=: read -r pkg test filter <<<"$spec"
     exe="$(binary "$pkg" "$test")"

@@ -4,7 +4,7 @@
 //! width × height finite values, in [0, 1] for integer samples.
 #![no_main]
 
-use affcorr_runner::{GrayImage, PixelData};
+use affcorr_image::{GrayImage, PixelData};
 use libfuzzer_sys::fuzz_target;
 
 fn check(img: &GrayImage, unit: bool) {

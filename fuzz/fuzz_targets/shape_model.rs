@@ -10,7 +10,8 @@
 
 use std::sync::OnceLock;
 
-use affcorr_runner::{GrayImage, ShapeEstimator, ShapeModel, ShapeModelOptions};
+use affcorr_image::GrayImage;
+use affcorr_runner::{ShapeEstimator, ShapeModel, ShapeModelOptions};
 use libfuzzer_sys::fuzz_target;
 
 fn image() -> &'static GrayImage {

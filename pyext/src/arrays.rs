@@ -143,6 +143,14 @@ pub fn to_numpy<'py>(
     Ok(array.into_pyarray(py))
 }
 
+/// A 3×3 matrix as a new (3, 3) array.
+pub fn mat3_to_numpy<'py>(
+    py: Python<'py>,
+    m: &affcorr::geom::Mat3,
+) -> PyResult<Bound<'py, PyArrayDyn<f64>>> {
+    to_numpy(py, &[3, 3], affcorr::geom::types::mat3_to_row(m).to_vec())
+}
+
 /// Flattens rows of width `W` into one vector (no copy of the allocation's elements twice).
 pub fn flatten<const W: usize>(rows: Vec<[f64; W]>) -> Vec<f64> {
     rows.into_iter().flatten().collect()

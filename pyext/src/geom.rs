@@ -1,7 +1,7 @@
 //! Bindings of affcorr-geom. Docstrings live in `python/affcorr/_native.pyi` and the Python
 //! package; names and argument names mirror the Rust functions.
 
-use crate::arrays::{Dim, F64Array, flatten, to_numpy, value_error};
+use crate::arrays::{Dim, F64Array, flatten, mat3_to_numpy, to_numpy, value_error};
 use affcorr::geom::affine::{self, AffineShape};
 use affcorr::geom::camera::{self, Intrinsics};
 use affcorr::geom::{Mat3, Vec2, Vec3, epipolar, homography};
@@ -41,10 +41,6 @@ pub fn matrix3(obj: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Mat3> {
         return Err(value_error(format!("{name} contains NaN or infinity")));
     }
     Ok(m)
-}
-
-fn mat3_to_numpy<'py>(py: Python<'py>, m: &Mat3) -> PyResult<Array<'py>> {
-    to_numpy(py, &[3, 3], affcorr::geom::types::mat3_to_row(m).to_vec())
 }
 
 #[pyfunction]

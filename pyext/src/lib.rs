@@ -4,9 +4,13 @@
 //!   argument, and the mapping of Rust errors to Python exceptions.
 //! - `geom`: synthesis, decomposition, homography ACs, normalisation, LAFs, epipolar utilities.
 //! - `sampson`: Sampson distances and their gradients.
-//! - `solvers`: minimal and non-minimal solvers.
-//! - `runner`: the shape network, patch extraction and image decoding (ONNX Runtime).
-//! - `pipeline`: the end-to-end pipeline: images → matches (XFeat) → ACs.
+//! - `solvers`: minimal and non-minimal solvers (`solvers/inputs.rs`: what they share).
+//! - `ransac`: the robust estimators and their keyword options.
+//! - `image`: image decoding, patch extraction, the affine Lucas–Kanade refinement.
+//! - `runner`: the shape network and ONNX Runtime's loading.
+//! - `pipeline`: the end-to-end pipeline: images → matches → ACs → H, F or relative pose, with
+//!   its defaults, matcher names and model files.
+//! - `errors`: Rust errors to Python exceptions.
 //!
 //! Every function validates its inputs here or in Rust and raises `ValueError` naming the bad
 //! argument; no Rust panic can cross this boundary because the core crates return `Result`s.
@@ -15,7 +19,9 @@
 use pyo3::prelude::*;
 
 mod arrays;
+mod errors;
 mod geom;
+mod image;
 mod pipeline;
 mod ransac;
 mod runner;
@@ -26,6 +32,7 @@ mod solvers;
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     geom::register(m)?;
+    image::register(m)?;
     pipeline::register(m)?;
     ransac::register(m)?;
     runner::register(m)?;

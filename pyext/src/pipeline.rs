@@ -1,22 +1,28 @@
-//! Bindings of the end-to-end pipeline (`affcorr::runner::Pipeline`): images → matches → ACs.
-//! The Python package (`affcorr.pipeline`) wraps [`PipelineRunner`] into `affcorr.Pipeline`,
-//! which finds the bundled models and adds the robust estimation (`affcorr.estimate_*`).
+//! Bindings of the end-to-end pipeline (`affcorr::pipeline::Pipeline`): images → matches → ACs
+//! → H, F or relative pose. The Python package (`affcorr.pipeline`) wraps [`PipelineRunner`]
+//! into `affcorr.Pipeline`, which finds the bundled models; every step, name and default comes
+//! from the Rust crate (`PIPELINE_DEFAULTS`, `PIPELINE_MATCHERS`, `PIPELINE_MODEL_FILES`).
 //!
 //! - Images are file paths (decoded in Rust, timed as `decode`) or numpy arrays (as
 //!   `affcorr.ShapeEstimator` takes them; the conversion is timed as `decode`). A dense
 //!   matcher gets (H, W, 3 | 4) arrays in colour.
-//! - Errors follow `runner.rs`: bad arguments and images raise `ValueError`, missing files
+//! - Errors follow `errors.rs`: bad arguments and images raise `ValueError`, missing files
 //!   `FileNotFoundError`, model problems (contracts, ONNX Runtime) `RuntimeError`.
-//! - Matching runs with the GIL released.
+//! - Estimation options are `affcorr.estimate_*`'s keyword options (`ransac.rs` parses them);
+//!   no model found is a NaN model with no inliers, as there.
+//! - Matching and estimation run with the GIL released.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use crate::arrays::{flatten, to_numpy};
-use crate::runner::{gray_image, py_error};
-use affcorr::runner::{
-    AffineRefineOptions, GrayImage, ImageSource, Matcher, Matches, Pipeline, RgbImage,
-    init_ort as init,
+use crate::errors::{image_error, pipeline_error, runner_error};
+use crate::image::gray_image;
+use crate::ransac::{mat_result, nan_mat3, nan_pose, outcome, parse_options, pose_result};
+use affcorr::pipeline::defaults::{self, Geometry};
+use affcorr::pipeline::{
+    AffineRefineOptions, Estimated, GrayImage, ImageSource, Matcher, Matches, Pipeline,
+    PipelineError, RgbImage, init_ort as init, model_file,
 };
 use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
@@ -25,6 +31,36 @@ use pyo3::types::{PyDict, PyEllipsis, PyList, PySlice, PyTuple};
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PipelineRunner>()?;
+    let py = m.py();
+    let d = PyDict::new(py);
+    d.set_item("matcher", defaults::MATCHER.name())?;
+    d.set_item("max_keypoints", defaults::MAX_KEYPOINTS)?;
+    d.set_item("dense_matches", defaults::DENSE_MATCHES)?;
+    d.set_item("refine_affine", defaults::REFINE_AFFINE)?;
+    d.set_item("seed", defaults::SEED)?;
+    d.set_item("homography_threshold", defaults::HOMOGRAPHY_THRESHOLD)?;
+    d.set_item("fundamental_threshold", defaults::FUNDAMENTAL_THRESHOLD)?;
+    d.set_item("pose_threshold", defaults::POSE_THRESHOLD)?;
+    m.add("PIPELINE_DEFAULTS", d)?;
+    let names: Vec<&str> = Matcher::ALL.iter().map(|m| m.name()).collect();
+    m.add("PIPELINE_MATCHERS", names)?;
+    let needs = PyDict::new(py);
+    for matcher in Matcher::ALL {
+        let roles: Vec<&str> = matcher.models().iter().map(|r| r.name()).collect();
+        needs.set_item(matcher.name(), roles)?;
+    }
+    m.add("PIPELINE_MATCHER_MODELS", needs)?;
+    let files = PyDict::new(py);
+    for role in [
+        affcorr::pipeline::ModelRole::Backbone,
+        affcorr::pipeline::ModelRole::Refine,
+        affcorr::pipeline::ModelRole::LighterGlue,
+        affcorr::pipeline::ModelRole::Dense,
+    ] {
+        files.set_item(role.name(), model_file(role))?;
+    }
+    files.set_item("shape", affcorr::pipeline::SHAPE_FILE)?;
+    m.add("PIPELINE_MODEL_FILES", files)?;
     Ok(())
 }
 
@@ -79,8 +115,8 @@ fn image_arg(
         let rgb = np.call_method("ascontiguousarray", (rgb,), Some(&kwargs))?;
         let rgb = rgb.call_method1("__truediv__", (scale,))?;
         let rgb = rgb.cast::<PyArrayDyn<f32>>()?.readonly();
-        let img =
-            RgbImage::new(w, h, rgb.as_slice()?.to_vec()).map_err(|e| py_error(e, Some(name)))?;
+        let img = RgbImage::new(w, h, rgb.as_slice()?.to_vec())
+            .map_err(|e| image_error(e, Some(name)))?;
         return Ok((ImageArg::Rgb(img), t.elapsed()));
     }
     let img = gray_image(py, obj, name)?;
@@ -128,7 +164,8 @@ impl PipelineRunner {
     #[pyo3(signature = (
         *, matcher, shape_model, backbone_model = None, refine_model = None,
         lighterglue_model = None, dense_model = None, ort_library = None, max_keypoints = None,
-        max_matches = None, max_side = None, threads = None, seed = 0, refine_affine = true
+        max_matches = None, max_side = None, threads = None, seed = defaults::SEED,
+        refine_affine = defaults::REFINE_AFFINE
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -147,7 +184,7 @@ impl PipelineRunner {
         seed: u64,
         refine_affine: bool,
     ) -> PyResult<Self> {
-        let matcher: Matcher = matcher.parse().map_err(|e| py_error(e, None))?;
+        let matcher: Matcher = matcher.parse().map_err(|e| runner_error(e, None))?;
         let mut b = Pipeline::builder()
             .matcher(matcher)
             .shape_model(shape_model)
@@ -188,7 +225,7 @@ impl PipelineRunner {
             b.build()
         })
         .map(|inner| Self { inner })
-        .map_err(|e| py_error(e, None))
+        .map_err(|e| pipeline_error(e, None))
     }
 
     /// ACs of one pair: `(corrs, certainty, timings, num_keypoints)`.
@@ -203,8 +240,80 @@ impl PipelineRunner {
         let (b, tb) = image_arg(py, image_b, "image_b", colour)?;
         let m = py
             .detach(|| self.inner.match_pair(a.source(), b.source()))
-            .map_err(|e| py_error(e, None))?;
+            .map_err(|e| pipeline_error(e, None))?;
         match_tuple(py, m, ta + tb)
+    }
+
+    /// `((model, info), match tuple)` of a pair: `geometry` is `"homography"` (model H),
+    /// `"fundamental"` (F) or `"relative_pose"` (`(R, t, E, F)`, needs `K1`, `K2`, checked
+    /// before any matching); `affcorr.estimate_*`'s keyword options; `threshold=None` is the
+    /// pipeline's default for the geometry.
+    #[pyo3(signature = (geometry, image_a, image_b, *, K1 = None, K2 = None, threshold = None, **options))]
+    #[allow(non_snake_case, clippy::too_many_arguments)]
+    fn estimate<'py>(
+        &self,
+        py: Python<'py>,
+        geometry: &str,
+        image_a: &Bound<'py, PyAny>,
+        image_b: &Bound<'py, PyAny>,
+        K1: Option<&Bound<'py, PyAny>>,
+        K2: Option<&Bound<'py, PyAny>>,
+        threshold: Option<f64>,
+        options: Option<&Bound<'py, PyDict>>,
+    ) -> PyResult<(Bound<'py, PyAny>, MatchTuple<'py>)> {
+        let geometry = match geometry {
+            "homography" => Geometry::Homography,
+            "fundamental" => Geometry::Fundamental,
+            "relative_pose" => Geometry::RelativePose,
+            _ => {
+                return Err(PyValueError::new_err(format!(
+                    "geometry must be \"homography\", \"fundamental\" or \"relative_pose\", \
+                     got {geometry:?}"
+                )));
+            }
+        };
+        let intrinsics = match (geometry, K1, K2) {
+            (Geometry::RelativePose, Some(k1), Some(k2)) => Some((
+                crate::geom::intrinsics(k1, "K1")?,
+                crate::geom::intrinsics(k2, "K2")?,
+            )),
+            (Geometry::RelativePose, _, _) => {
+                return Err(PyValueError::new_err("relative_pose needs K1 and K2"));
+            }
+            (_, None, None) => None,
+            _ => {
+                return Err(PyValueError::new_err(
+                    "K1 and K2 are only used with geometry=\"relative_pose\"",
+                ));
+            }
+        };
+        let mut opts = parse_options(options, geometry.default_options())?;
+        if let Some(t) = threshold {
+            opts.ransac.threshold = t;
+        }
+        let (a, b, t) = self.images(py, image_a, image_b)?;
+        let (a, b) = (a.source(), b.source());
+        let (model, m) = match intrinsics {
+            Some((k1, k2)) => {
+                let (o, m) = py.detach(|| {
+                    let e = self.inner.relative_pose(a, b, &k1, &k2, &opts);
+                    estimated(e, nan_pose())
+                })?;
+                (pose_result(py, &o)?.into_pyobject(py)?.into_any(), m)
+            }
+            None => {
+                let (o, m) = py.detach(|| {
+                    let e = if geometry == Geometry::Homography {
+                        self.inner.homography(a, b, &opts)
+                    } else {
+                        self.inner.fundamental(a, b, &opts)
+                    };
+                    estimated(e, nan_mat3())
+                })?;
+                (mat_result(py, &o)?.into_pyobject(py)?.into_any(), m)
+            }
+        };
+        Ok((model, match_tuple(py, m, t)?))
     }
 
     /// ACs of many pairs (a sequence of `(image_a, image_b)`), in parallel on single-threaded
@@ -247,7 +356,7 @@ impl PipelineRunner {
         });
         let mut out = Vec::with_capacity(results.len());
         for (i, (r, (_, _, t))) in results.into_iter().zip(&args).enumerate() {
-            let m = r.map_err(|e| prefix_error(py, i, py_error(e, None)))?;
+            let m = r.map_err(|e| prefix_error(py, i, pipeline_error(e, None)))?;
             out.push(match_tuple(py, m, *t)?);
         }
         PyList::new(py, out)
@@ -302,6 +411,37 @@ impl PipelineRunner {
             d.set_item(k, v)?;
         }
         Ok(d)
+    }
+}
+
+impl PipelineRunner {
+    /// Both image arguments, converted (a dense matcher takes colour), and the conversion time.
+    fn images(
+        &self,
+        py: Python<'_>,
+        image_a: &Bound<'_, PyAny>,
+        image_b: &Bound<'_, PyAny>,
+    ) -> PyResult<(ImageArg, ImageArg, Duration)> {
+        let colour = self.inner.matcher() == Matcher::Dense;
+        let (a, ta) = image_arg(py, image_a, "image_a", colour)?;
+        let (b, tb) = image_arg(py, image_b, "image_b", colour)?;
+        Ok((a, b, ta + tb))
+    }
+}
+
+/// The estimate as `affcorr.estimate_*` returns it (no model: NaN with no inliers) and the
+/// matches it came from; matching and option errors raise.
+fn estimated<M>(
+    r: Result<Estimated<M>, PipelineError>,
+    nan: M,
+) -> PyResult<(crate::ransac::Outcome<M>, Matches)> {
+    match r {
+        Ok(e) => {
+            let n = e.matches.len();
+            let o = outcome(Ok(e.estimate), n, nan).map_err(crate::arrays::value_error)?;
+            Ok((o, e.matches))
+        }
+        Err(e) => Err(pipeline_error(e, None)),
     }
 }
 

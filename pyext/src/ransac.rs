@@ -16,7 +16,7 @@
 //! - Estimation runs with the GIL released; the batch forms run the pairs in parallel with
 //!   rayon (`RAYON_NUM_THREADS` caps the threads).
 
-use crate::arrays::{Dim, F64Array, to_numpy, value_error};
+use crate::arrays::{Dim, F64Array, mat3_to_numpy, to_numpy, value_error};
 use affcorr::geom::Mat3;
 use affcorr::geom::camera::Intrinsics;
 use affcorr::ransac::problems::relpose::PoseModel;
@@ -166,8 +166,11 @@ fn type_error(name: &str, what: &str, v: &Bound<'_, PyAny>) -> PyErr {
 
 /// Builds the options from the explicit arguments and the keyword options. Unknown names are
 /// collected and reported together, with the valid names.
-fn parse_options(options: Option<&Bound<'_, PyDict>>) -> PyResult<EstimatorOptions> {
-    let mut o = EstimatorOptions::default();
+pub(crate) fn parse_options(
+    options: Option<&Bound<'_, PyDict>>,
+    defaults: EstimatorOptions,
+) -> PyResult<EstimatorOptions> {
+    let mut o = defaults;
     let mut unknown = Vec::new();
     if let Some(options) = options {
         for (key, value) in options.iter() {
@@ -191,7 +194,7 @@ fn parse_options(options: Option<&Bound<'_, PyDict>>) -> PyResult<EstimatorOptio
 // --- inputs and outputs ---------------------------------------------------------------------------
 
 /// What the estimators return, before conversion to Python.
-struct Outcome<M> {
+pub(crate) struct Outcome<M> {
     model: M,
     inliers: Vec<bool>,
     num_inliers: usize,
@@ -204,7 +207,7 @@ struct Outcome<M> {
 }
 
 /// `NoModel` becomes a NaN model with no inliers; every other error is a `ValueError`.
-fn outcome<M>(
+pub(crate) fn outcome<M>(
     r: Result<Estimate<M>, RansacError>,
     n: usize,
     nan: M,
@@ -236,11 +239,11 @@ fn outcome<M>(
     }
 }
 
-fn nan_mat3() -> Mat3 {
+pub(crate) fn nan_mat3() -> Mat3 {
     Mat3::from_element(f64::NAN)
 }
 
-fn nan_pose() -> PoseModel {
+pub(crate) fn nan_pose() -> PoseModel {
     PoseModel {
         pose: affcorr::geom::epipolar::Pose {
             r: nan_mat3(),
@@ -249,10 +252,6 @@ fn nan_pose() -> PoseModel {
         essential: nan_mat3(),
         fundamental: nan_mat3(),
     }
-}
-
-fn mat3<'py>(py: Python<'py>, m: &Mat3) -> PyResult<Array<'py>> {
-    to_numpy(py, &[3, 3], affcorr::geom::types::mat3_to_row(m).to_vec())
 }
 
 fn info<'py, M>(py: Python<'py>, o: &Outcome<M>) -> PyResult<Bound<'py, PyDict>> {
@@ -268,25 +267,28 @@ fn info<'py, M>(py: Python<'py>, o: &Outcome<M>) -> PyResult<Bound<'py, PyDict>>
     Ok(d)
 }
 
-type MatResult<'py> = (Array<'py>, Bound<'py, PyDict>);
-type PoseResult<'py> = (
+pub(crate) type MatResult<'py> = (Array<'py>, Bound<'py, PyDict>);
+pub(crate) type PoseResult<'py> = (
     (Array<'py>, Array<'py>, Array<'py>, Array<'py>),
     Bound<'py, PyDict>,
 );
 
-fn mat_result<'py>(py: Python<'py>, o: &Outcome<Mat3>) -> PyResult<MatResult<'py>> {
-    Ok((mat3(py, &o.model)?, info(py, o)?))
+pub(crate) fn mat_result<'py>(py: Python<'py>, o: &Outcome<Mat3>) -> PyResult<MatResult<'py>> {
+    Ok((mat3_to_numpy(py, &o.model)?, info(py, o)?))
 }
 
-fn pose_result<'py>(py: Python<'py>, o: &Outcome<PoseModel>) -> PyResult<PoseResult<'py>> {
+pub(crate) fn pose_result<'py>(
+    py: Python<'py>,
+    o: &Outcome<PoseModel>,
+) -> PyResult<PoseResult<'py>> {
     let m = &o.model;
     let t = to_numpy(py, &[3], m.pose.t.iter().copied().collect())?;
     Ok((
         (
-            mat3(py, &m.pose.r)?,
+            mat3_to_numpy(py, &m.pose.r)?,
             t,
-            mat3(py, &m.essential)?,
-            mat3(py, &m.fundamental)?,
+            mat3_to_numpy(py, &m.essential)?,
+            mat3_to_numpy(py, &m.fundamental)?,
         ),
         info(py, o)?,
     ))
@@ -302,7 +304,7 @@ fn run_one<M: Send>(
     nan: M,
     f: impl Fn(&Correspondences, &EstimatorOptions) -> Result<Estimate<M>, RansacError> + Send,
 ) -> PyResult<Outcome<M>> {
-    let opts = parse_options(options)?;
+    let opts = parse_options(options, EstimatorOptions::default())?;
     let a = F64Array::extract(corrs, "corrs")?.expect_one_of(&CORRS)?;
     let (slice, width) = (a.as_slice(), a.shape()[1]);
     py.detach(move || {
@@ -400,7 +402,7 @@ fn read_batch<'py>(
         None => (None, None, None),
     };
     let options = (quality, options);
-    let shared = parse_options(options.1.as_ref())?;
+    let shared = parse_options(options.1.as_ref(), EstimatorOptions::default())?;
     let mut per_pair = vec![shared; arrays.len()];
     if let Some(q) = options.0.filter(|q| !q.is_none()) {
         let list: Vec<Bound<'py, PyAny>> = q

@@ -57,7 +57,7 @@ from .estimation import (
     estimate_relative_pose,
     estimate_relative_pose_batch,
 )
-from .pipeline import MatchResult, Pipeline
+from .pipeline import PIPELINE_DEFAULTS, MatchResult, Pipeline
 from .shape import (
     AffineRefinement,
     ShapeEstimate,
@@ -79,6 +79,7 @@ __all__ = [
     "estimate_relative_pose",
     "estimate_relative_pose_batch",
     "MatchResult",
+    "PIPELINE_DEFAULTS",
     "Pipeline",
     "AffineRefinement",
     "ShapeEstimate",

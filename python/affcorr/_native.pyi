@@ -20,7 +20,7 @@ __version__: str
 def synthesize_affine(
     orientation: ArrayLike, scale: ArrayLike, residual_shape: ArrayLike
 ) -> NDArray[np.float64]:
-    """A = scale · R(orientation) · A'(residual_shape) per row (paper eq. 7).
+    """A = scale · R(orientation) · A'(residual_shape) per row (paper eq. 11).
 
     orientation (N,) radians; scale (N,) > 0; residual_shape (N, 3) = (x0, x1, x2) with
     A' = B / sqrt(det B), B = [[1 + x0, 0], [x1, 1 + x2]], 1 + x0 > 0, 1 + x2 > 0.
@@ -70,7 +70,7 @@ def pose_from_essential(
     """The (R, t) of E that puts the most normalised correspondences x1, x2 (N, 2) in front of
     both cameras, and that count."""
 
-# --- Sampson distances (docs/design.md §3) ---------------------------------------------------------
+# --- Sampson distances (docs/design.md §3) --------------------------------------------------------
 # F is (3, 3), shared by every row, or (N, 3, 3), one per row. Distances are in squared units of
 # the coordinates (pixels^2 for a pixel F) and invariant to the scale of F. A zero denominator
 # (only for special F) gives 0 when the residual is 0 too, else +inf, with zero gradient.
@@ -99,7 +99,7 @@ def sampson_affine_grad(
     """sampson_affine and its analytic gradients per row and per constraint row k:
     (dist (N, 2), d_corrs (N, 2, 8), d_F (N, 2, 3, 3)), d_corrs[n, k] = dSD_A,k/d corrs[n]."""
 
-# --- homography / fundamental solvers (issue #3) -----------------------------------------------
+# --- homography / fundamental solvers -------------------------------------------------------------
 # Inputs are pixels (normalised internally). Each solver returns a list of candidate models, each
 # a (3, 3) array with unit Frobenius norm and arbitrary sign: p2 ~ H p1 for homographies,
 # p2^T F p1 = 0 for fundamental matrices. A degenerate sample (collinear or coincident points,
@@ -142,7 +142,7 @@ def fundamental_ac_lsq(corrs: ArrayLike) -> list[NDArray[np.float64]]:
     """Non-minimal F from N >= 3 ACs (N, 8): the fundamental_3ac system over all ACs, least
     squares, rank 2 enforced."""
 
-# --- robust estimation (issue #4) ---------------------------------------------------------------
+# --- robust estimation ----------------------------------------------------------------------------
 # The raw bindings; affcorr.estimation wraps them into (model, RansacInfo) pairs and documents
 # the options. `options` are keyword options (see ESTIMATOR_OPTIONS), validated in Rust: an
 # unknown name or an invalid value raises ValueError naming it. Each info dict has the keys
@@ -219,7 +219,7 @@ def essential_lsq(
     """Like essential_8pt with the three equations of each normalised AC in corrs (M, 8) stacked
     under the point rows; needs N + 3M >= 8. x1, x2 may have zero rows."""
 
-# --- shape network runner (docs/design.md §6; wrapped by affcorr.shape) ----------------------------
+# --- shape network runner (docs/design.md §6; wrapped by affcorr.shape) ---------------------------
 
 class ShapeRunner:
     """The shape network loaded through ONNX Runtime (use ``affcorr.ShapeEstimator``).
@@ -299,7 +299,18 @@ def refine_affine(
     """Affine Lucas-Kanade refinement of ACs (wrapped by affcorr.refine_affine): (corrs (N, 8),
     refined (N,) bool, zncc (N,))."""
 
-# --- end-to-end pipeline (issue 6; wrapped by affcorr.pipeline) ----------------------------
+# --- end-to-end pipeline (wrapped by affcorr.pipeline) -------------------------------------------
+
+_MatchTuple = tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]
+
+#: The pipeline's one set of defaults (affcorr-pipeline's `defaults` module).
+PIPELINE_DEFAULTS: dict[str, Any]
+#: Matcher names, the default first.
+PIPELINE_MATCHERS: list[str]
+#: The model roles each matcher runs.
+PIPELINE_MATCHER_MODELS: dict[str, list[str]]
+#: Model file names in a models directory, by role.
+PIPELINE_MODEL_FILES: dict[str, str]
 
 class PipelineRunner:
     """Matcher (XFeat backbone + MNN / XFeat* refinement / LighterGlue, or a dense-warp-v1
@@ -323,8 +334,23 @@ class PipelineRunner:
         max_side: int | None = None,
         threads: int | None = None,
         seed: int = 0,
-        refine_affine: bool = False,
+        refine_affine: bool = True,
     ) -> None: ...
+    def estimate(
+        self,
+        geometry: str,
+        image_a: Any,
+        image_b: Any,
+        *,
+        K1: Any = None,  # noqa: N803
+        K2: Any = None,  # noqa: N803
+        threshold: float | None = None,
+        **options: Any,
+    ) -> tuple[tuple[Any, dict[str, Any]], _MatchTuple]:
+        """((model, info), match tuple) for geometry "homography" (H), "fundamental" (F) or
+        "relative_pose" ((R, t, E, F); K1, K2 checked before matching): the Rust Pipeline's
+        estimators with estimate_*'s keyword options; threshold None is the pipeline's default;
+        GIL released."""
     def match_pair(
         self, image_a: Any, image_b: Any
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]:

@@ -3,7 +3,8 @@
     affcorr match A B -o acs.npz            images -> ACs (N, 8) with certainty
     affcorr match --pairs list.txt -o DIR   many pairs (one "A B" per line), with a progress bar
     affcorr homography A B [--gt H.txt]     H, inliers, and the corner error against a ground truth
-    affcorr pose A B --K1 ... --K2 ...      relative pose (R, t) from calibrated images
+                       [-o h.json|h.npz]    ... saved at full precision (.npz: with the ACs)
+    affcorr pose A B --K1 ... --K2 ...      relative pose (R, t) from calibrated images [-o ...]
     affcorr show acs.npz -o matches.png     picture: matches (coloured by correctness with --gt)
                                             and affine frames as ellipses
     affcorr demo                            the whole pipeline on graffiti 1->3 (ground-truth H)
@@ -22,8 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .metrics import corner_error
-
-MATCHERS = ["xfeat-lighterglue", "xfeat", "xfeat-star", "dense"]
+from .pipeline import MATCHERS, PIPELINE_DEFAULTS
 
 
 def read_matrix(text: str, what: str) -> np.ndarray:
@@ -81,7 +81,7 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
         "--matcher",
         choices=MATCHERS,
         default=None,
-        help="default: dense with --dense-model, else xfeat-lighterglue",
+        help=f"default: dense with --dense-model, else {PIPELINE_DEFAULTS['matcher']}",
     )
     p.add_argument(
         "--dense-model",
@@ -91,7 +91,12 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--shape-model", default=None, help="a shape-v1 ONNX network (default: the bundled one)"
     )
-    p.add_argument("--max-keypoints", type=int, default=2048, help="keypoints per image")
+    p.add_argument(
+        "--max-keypoints",
+        type=int,
+        default=PIPELINE_DEFAULTS["max_keypoints"],
+        help="keypoints per image (default: %(default)s)",
+    )
     p.add_argument(
         "--max-side",
         type=int,
@@ -102,9 +107,9 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--refine-affine",
         action=argparse.BooleanOptionalAction,
-        default=True,
+        default=PIPELINE_DEFAULTS["refine_affine"],
         help="refine the ACs against the images by affine Lucas-Kanade (affcorr.refine_affine; "
-        "default: on)",
+        "default: %(default)s)",
     )
 
 
@@ -160,11 +165,61 @@ def cmd_match(args) -> int:
     return 0
 
 
+def _estimate_output(path: str | None) -> Path | None:
+    """``-o`` of an estimating command: a .json or .npz path, checked before any work."""
+    if path is None:
+        return None
+    out = _output_file(path, "-o")
+    if out.suffix not in (".json", ".npz"):
+        raise ValueError(f"-o: {path!r} must end in .json or .npz")
+    return out
+
+
+def _save_estimate(out: Path | None, args, models: dict, info, res) -> None:
+    """The model at full precision with the estimation's info: JSON (inlier indices), or .npz
+    (with the ACs, their certainty and the inlier mask too)."""
+    if out is None:
+        return
+    summary = {
+        "image_a": str(args.image_a),
+        "image_b": str(args.image_b),
+        "matcher": args.matcher or PIPELINE_DEFAULTS["matcher"],
+        "threshold": args.threshold,
+        "num_acs": len(res.corrs),
+        "num_inliers": int(info.num_inliers),
+        "num_iterations": int(info.num_iterations),
+        "score": float(info.score),
+    }
+    if out.suffix == ".json":
+        import json
+
+        payload = {
+            **summary,
+            **{k: np.asarray(v).tolist() for k, v in models.items()},
+            "inliers": np.flatnonzero(info.inliers).tolist(),
+        }
+        out.write_text(json.dumps(payload, indent=1) + "\n")
+    else:
+        np.savez(
+            out,
+            corrs=res.corrs,
+            certainty=res.certainty,
+            inliers=info.inliers,
+            **models,
+            **summary,
+        )
+    print(f"-> {out}")
+
+
 def cmd_homography(args) -> int:
-    # A bad --gt fails before the matching, not after it.
+    # A bad --gt or -o fails before the matching, not after it.
     H_gt = read_matrix(args.gt, "--gt") if args.gt is not None else None
+    out = _estimate_output(args.output)
     pipe = _pipeline(args)
-    H, info = pipe.homography(args.image_a, args.image_b, threshold=args.threshold)
+    H, info, res = pipe.homography(
+        args.image_a, args.image_b, threshold=args.threshold, return_matches=True
+    )
+    _save_estimate(out, args, {"H": H}, info, res)
     n = len(info.inliers)
     print(f"inliers: {int(info.inliers.sum())} / {n}")
     with np.printoptions(precision=6, suppress=True):
@@ -179,8 +234,13 @@ def cmd_homography(args) -> int:
 
 def cmd_pose(args) -> int:
     K1, K2 = read_matrix(args.K1, "--K1"), read_matrix(args.K2, "--K2")
+    out = _estimate_output(args.output)
     pipe = _pipeline(args)
-    pose, info = pipe.relative_pose(args.image_a, args.image_b, K1, K2, threshold=args.threshold)
+    pose, info, res = pipe.relative_pose(
+        args.image_a, args.image_b, K1, K2, threshold=args.threshold, return_matches=True
+    )
+    models = {"R": pose.R, "t": pose.t, "E": pose.E, "F": pose.F}
+    _save_estimate(out, args, models, info, res)
     print(f"inliers: {int(info.inliers.sum())} / {len(info.inliers)}")
     with np.printoptions(precision=6, suppress=True):
         print(f"R =\n{pose.R}\nt = {pose.t}")
@@ -243,8 +303,16 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("homography", help="estimate H between two images")
     p.add_argument("image_a")
     p.add_argument("image_b")
-    p.add_argument("--threshold", type=float, default=3.0, help="inlier threshold (px)")
+    p.add_argument(
+        "--threshold",
+        type=float,
+        default=PIPELINE_DEFAULTS["homography_threshold"],
+        help="inlier threshold (px, default: %(default)s)",
+    )
     p.add_argument("--gt", help="ground-truth H (text or OpenCV XML) to report the error")
+    p.add_argument(
+        "-o", "--output", help="save H (full precision) and the inliers: .json, or .npz with ACs"
+    )
     _add_pipeline_args(p)
     p.set_defaults(run=cmd_homography)
 
@@ -253,7 +321,15 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("image_b")
     p.add_argument("--K1", required=True, help="fx,fy,cx,cy | 9 numbers | file")
     p.add_argument("--K2", required=True, help="fx,fy,cx,cy | 9 numbers | file")
-    p.add_argument("--threshold", type=float, default=1.0, help="inlier threshold (px)")
+    p.add_argument(
+        "-o", "--output", help="save R, t, E, F and the inliers: .json, or .npz with ACs"
+    )
+    p.add_argument(
+        "--threshold",
+        type=float,
+        default=PIPELINE_DEFAULTS["pose_threshold"],
+        help="inlier threshold (px, default: %(default)s)",
+    )
     _add_pipeline_args(p)
     p.set_defaults(run=cmd_pose)
 
@@ -272,8 +348,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="the geometry-only demo (ACs from the ground-truth H)",
     )
     p.add_argument("--step", type=int, default=40, help="--geometry: grid step in pixels")
-    p.add_argument("--matcher", choices=MATCHERS, default="xfeat-lighterglue")
-    p.add_argument("--max-keypoints", type=int, default=2048)
+    p.add_argument("--matcher", choices=MATCHERS, default=PIPELINE_DEFAULTS["matcher"])
+    p.add_argument("--max-keypoints", type=int, default=PIPELINE_DEFAULTS["max_keypoints"])
     p.set_defaults(run=cmd_demo)
     return parser
 

@@ -1,4 +1,5 @@
-"""Torch losses over the Rust Sampson kernels (docs/design.md §3). Needs the ``affcorr[train]`` extra.
+"""Torch losses over the Rust Sampson kernels (docs/design.md §3). Needs the ``affcorr[train]``
+extra.
 
 torch comes from Debian's ``python3-torch`` (docs/design.md §7); it is never imported by
 ``import affcorr``, only by ``import affcorr.losses``.
@@ -156,7 +157,8 @@ def _check_reduction(reduction: str) -> str:
 
 
 class PointSampsonLoss(torch.nn.Module):
-    """L_pc = mean over rows of SD_P (docs/design.md §3); ``reduction`` as in torch ('mean' default).
+    """L_pc = mean over rows of SD_P (docs/design.md §3); ``reduction`` as in torch ('mean'
+    default).
 
     ``forward(F, corrs)`` with F (3, 3) or (N, 3, 3) and corrs (N, 4) or (N, 8).
     """

@@ -17,11 +17,19 @@
 4. **patches** and **shape_net**: 32x32 patches around the matched points and the shape network's
    affine map ``A = dx2/dx1`` at each (``models/shape.onnx``, see :class:`affcorr.ShapeEstimator`).
 
+5. **affine_refine**: affine Lucas-Kanade refinement of the ACs against the images (on by
+   default, see :func:`affcorr.refine_affine`).
+
 Results are in the original images' pixels, sorted by decreasing certainty (MNN: cosine
 similarity of the descriptors; XFeat*: refinement confidence; LighterGlue: match score).
-:meth:`Pipeline.homography` and :meth:`Pipeline.relative_pose` add the robust estimation of
-:func:`affcorr.estimate_homography` / :func:`affcorr.estimate_relative_pose` on the ACs, with the
-same options and return types (``ransac`` in the timings).
+:meth:`Pipeline.homography`, :meth:`Pipeline.fundamental` and :meth:`Pipeline.relative_pose` add
+the robust estimation of :func:`affcorr.estimate_homography` / :func:`affcorr.estimate_fundamental`
+/ :func:`affcorr.estimate_relative_pose` on the ACs, with the same keyword options and return
+types (``ransac`` in the timings).
+
+This module is a thin layer over the Rust crate ``affcorr-pipeline``: every step runs there, and
+the matcher names, model file names and defaults are read from it (:data:`PIPELINE_DEFAULTS`),
+so the Rust API, this API and the CLI share one set (docs/pipeline.md says why each value).
 
 Errors: bad arguments and undecodable images raise ``ValueError``; missing image or model files
 ``FileNotFoundError``; models that break their ONNX contract and ONNX Runtime problems
@@ -31,7 +39,6 @@ Errors: bad arguments and undecodable images raise ``ValueError``; missing image
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -41,27 +48,38 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _native
-from .estimation import RansacInfo, RelativePose, estimate_homography, estimate_relative_pose
+from .estimation import RansacInfo, RelativePose, _info, _pose
 from .shape import bundled_shape_model, find_ort_library
 
-__all__ = ["DEFAULT_DENSE_MATCHES", "MATCHERS", "MatchResult", "Pipeline", "bundled_models_dir"]
+__all__ = [
+    "DEFAULT_DENSE_MATCHES",
+    "MATCHERS",
+    "PIPELINE_DEFAULTS",
+    "MatchResult",
+    "Pipeline",
+    "bundled_models_dir",
+]
 
-#: The matcher names :class:`Pipeline` takes.
-MATCHERS: tuple[str, ...] = ("xfeat-lighterglue", "xfeat", "xfeat-star", "dense")
+#: The pipeline's defaults, one set for Rust, Python and the CLI (from ``affcorr-pipeline``):
+#: ``matcher``, ``max_keypoints``, ``dense_matches``, ``refine_affine``, ``seed``,
+#: ``homography_threshold``, ``fundamental_threshold``, ``pose_threshold`` (pixels).
+PIPELINE_DEFAULTS: dict[str, Any] = dict(_native.PIPELINE_DEFAULTS)
+
+#: The matcher names :class:`Pipeline` takes, the default first.
+MATCHERS: tuple[str, ...] = tuple(_native.PIPELINE_MATCHERS)
 
 #: Matches a dense matcher draws by default (``max_matches=None``).
-DEFAULT_DENSE_MATCHES = 2000
+DEFAULT_DENSE_MATCHES: int = PIPELINE_DEFAULTS["dense_matches"]
 
 #: An image: a PNG/JPEG file path, or an array (H, W) / (H, W, C), C in 1..4, of dtype uint8
 #: (divided by 255), uint16 (divided by 65535) or float (values in [0, 1]).
 ImageLike = Union[str, "os.PathLike[str]", np.ndarray]
 
-_FILES = {
-    "backbone": "xfeat_backbone.onnx",
-    "refine": "xfeat_refine.onnx",
-    "lighterglue": "xfeat_lighterglue.onnx",
-    "dense": "dense.onnx",
-}
+#: Model file names in a models directory, by role, and the roles each matcher needs.
+_FILES: dict[str, str] = dict(_native.PIPELINE_MODEL_FILES)
+_NEEDS: dict[str, list[str]] = {k: list(v) for k, v in _native.PIPELINE_MATCHER_MODELS.items()}
+
+_D = PIPELINE_DEFAULTS
 
 
 def bundled_models_dir() -> Path:
@@ -115,7 +133,8 @@ class Pipeline:
             correct matches, but its cost grows with ``max_keypoints`` squared), ``"xfeat"``
             (mutual nearest neighbours, fastest), ``"xfeat-star"`` (semi-dense XFeat* with
             sub-pixel refinement) or ``"dense"`` (a ``dense-warp-v1`` model, ``dense_model``).
-            ``None``: ``"dense"`` when ``dense_model`` is given, else ``"xfeat-lighterglue"``.
+            ``None``: ``"dense"`` when ``dense_model`` is given, else the default
+            (``PIPELINE_DEFAULTS["matcher"]``).
         max_keypoints: keypoints per image (semi-dense cells for ``"xfeat-star"``; unused by
             ``"dense"``).
         max_matches: keep at most this many matches, the most certain; ``None``: all. A dense
@@ -134,11 +153,10 @@ class Pipeline:
         seed: seed of the dense matcher's balanced sampling (the same seed gives the same
             matches).
         refine_affine: refine the network's ACs against the images by affine Lucas-Kanade
-            (:func:`affcorr.refine_affine` with its defaults; x2 moves too). On by default: at
-            XFeat+LighterGlue's matches it takes the median affine error from ~0.2 to ~0.01
-            (benches/results/eval/affine.md) and relative pose's AUC@5 from 52 to 59 %
-            (benches/results/pose_refine.md). It costs a few times the shape network (timed
-            as ``affine_refine``); ``False`` gives the network's ACs alone.
+            (:func:`affcorr.refine_affine` with its defaults; x2 moves too). On by default; its
+            effect is measured in benches/results/eval/affine.md and
+            benches/results/pose_refine.md. It costs a few times the shape network (timed as
+            ``affine_refine``); ``False`` gives the network's ACs alone.
 
     Every model's ONNX contract is checked on loading.
 
@@ -155,18 +173,18 @@ class Pipeline:
         self,
         matcher: str | None = None,
         *,
-        max_keypoints: int = 4096,
+        max_keypoints: int = _D["max_keypoints"],
         max_matches: int | None = None,
         max_side: int | None = None,
         threads: int | None = None,
         shape_model: str | os.PathLike[str] | None = None,
         models_dir: str | os.PathLike[str] | None = None,
         dense_model: str | os.PathLike[str] | None = None,
-        seed: int = 0,
-        refine_affine: bool = True,
+        seed: int = _D["seed"],
+        refine_affine: bool = _D["refine_affine"],
     ) -> None:
         if matcher is None:
-            matcher = "dense" if dense_model is not None else "xfeat-lighterglue"
+            matcher = "dense" if dense_model is not None else _D["matcher"]
         if not isinstance(matcher, str) or matcher.lower() not in MATCHERS:
             raise ValueError(f"matcher must be one of {list(MATCHERS)}, got {matcher!r}")
         matcher = matcher.lower()
@@ -187,7 +205,7 @@ class Pipeline:
             shape = directory / "shape.onnx"
         else:
             shape = bundled_shape_model()
-        paths = {k: directory / f for k, f in _FILES.items()}
+        paths = {k: directory / f for k, f in _FILES.items() if k != "shape"}
         if dense_model is not None:
             paths["dense"] = Path(os.fspath(dense_model))
         elif matcher == "dense" and not paths["dense"].is_file():
@@ -196,12 +214,7 @@ class Pipeline:
                 f"docs/matchers.md says how to export DKM or RoMa) or {_FILES['dense']} in "
                 "models_dir"
             )
-        needs = {
-            "xfeat": ["backbone"],
-            "xfeat-star": ["backbone", "refine"],
-            "xfeat-lighterglue": ["backbone", "lighterglue"],
-            "dense": ["dense"],
-        }[matcher]
+        needs = _NEEDS[matcher]
         self._models = {**{k: paths[k] for k in needs}, "shape": shape}
         model_args = {f"{k}_model": str(paths[k]) for k in needs}
         self._runner = _native.PipelineRunner(
@@ -292,27 +305,20 @@ class Pipeline:
 
     # ----------------------------------------------------------------- estimation
 
-    @staticmethod
-    def _with_quality(res: MatchResult, options: dict[str, Any]) -> dict[str, Any]:
-        # PROSAC orders by quality: default to the matcher's certainty.
-        if str(options.get("sampler", "")).lower() == "prosac" and options.get("quality") is None:
-            options = {**options, "quality": res.certainty}
-        return options
-
-    @staticmethod
-    def _timed(res: MatchResult, seconds: float) -> MatchResult:
-        t = dict(res.timings)
-        t["ransac"] = t.get("ransac", 0.0) + seconds
-        t["total"] = t.get("total", 0.0) + seconds
-        return MatchResult(res.corrs, res.certainty, t, res.num_keypoints)
+    def _estimated(
+        self, out: tuple[Any, ...], model: Any, return_matches: bool
+    ) -> tuple[Any, RansacInfo] | tuple[Any, RansacInfo, MatchResult]:
+        (_, info), match = out
+        res = MatchResult(*match)
+        return (model, _info(info), res) if return_matches else (model, _info(info))
 
     def homography(
         self,
         image_a: ImageLike,
         image_b: ImageLike,
         *,
-        threshold: float = 2.0,
-        seed: int = 0,
+        threshold: float = _D["homography_threshold"],
+        seed: int = _D["seed"],
         return_matches: bool = False,
         **options: Any,
     ) -> (
@@ -321,22 +327,49 @@ class Pipeline:
         """The homography ``p2 ~ H p1`` (original pixels) of an image pair.
 
         :meth:`match_pair`, then :func:`affcorr.estimate_homography` on the ACs (2-AC samples by
-        default) with ``threshold`` (transfer error, pixels; the default 2 px suits XFeat's
-        pixel-grid keypoints, where 1 px loses inliers), ``seed`` and ``**options`` (see
+        default) with ``threshold`` (transfer error, pixels; the default is
+        ``PIPELINE_DEFAULTS["homography_threshold"]``), ``seed`` and ``**options`` (see
         :mod:`affcorr.estimation`; with ``sampler="prosac"`` and no ``quality``, the
-        certainties). ``info.inliers`` indexes the ACs of the match result, which
-        ``return_matches=True`` appends (its timings include ``ransac``).
+        certainties), all in Rust with the GIL released. ``info.inliers`` indexes the ACs of
+        the match result, which ``return_matches=True`` appends (its timings include
+        ``ransac``).
 
         Returns:
             ``(H, info)`` as :func:`affcorr.estimate_homography`, or ``(H, info, matches)``.
         """
-        res = self.match_pair(image_a, image_b)
-        t0 = time.perf_counter()
-        H, info = estimate_homography(
-            res.corrs, threshold=threshold, seed=seed, **self._with_quality(res, options)
-        )
-        res = self._timed(res, time.perf_counter() - t0)
-        return (H, info, res) if return_matches else (H, info)
+        out = self._runner.estimate(
+            "homography", self._image(image_a), self._image(image_b), threshold=threshold,
+            seed=seed, **options
+        )  # fmt: skip
+        return self._estimated(out, out[0][0], return_matches)
+
+    def fundamental(
+        self,
+        image_a: ImageLike,
+        image_b: ImageLike,
+        *,
+        threshold: float = _D["fundamental_threshold"],
+        seed: int = _D["seed"],
+        return_matches: bool = False,
+        **options: Any,
+    ) -> (
+        tuple[NDArray[np.float64], RansacInfo] | tuple[NDArray[np.float64], RansacInfo, MatchResult]
+    ):
+        """The fundamental matrix ``p2^T F p1 = 0`` (original pixels) of an image pair.
+
+        :meth:`match_pair`, then :func:`affcorr.estimate_fundamental` (3-AC samples by default)
+        with ``threshold`` (Sampson distance, pixels; default
+        ``PIPELINE_DEFAULTS["fundamental_threshold"]``), ``seed`` and ``**options``, as
+        :meth:`homography`. The scene must not be a single plane.
+
+        Returns:
+            ``(F, info)`` as :func:`affcorr.estimate_fundamental`, or ``(F, info, matches)``.
+        """
+        out = self._runner.estimate(
+            "fundamental", self._image(image_a), self._image(image_b), threshold=threshold,
+            seed=seed, **options
+        )  # fmt: skip
+        return self._estimated(out, out[0][0], return_matches)
 
     def relative_pose(
         self,
@@ -345,8 +378,8 @@ class Pipeline:
         K1: ArrayLike,  # noqa: N803 (intrinsics are capitals by convention)
         K2: ArrayLike,  # noqa: N803
         *,
-        threshold: float = 2.0,
-        seed: int = 0,
+        threshold: float = _D["pose_threshold"],
+        seed: int = _D["seed"],
         return_matches: bool = False,
         **options: Any,
     ) -> tuple[RelativePose, RansacInfo] | tuple[RelativePose, RansacInfo, MatchResult]:
@@ -355,21 +388,18 @@ class Pipeline:
         ``K1``, ``K2``: ``(3, 3)`` intrinsics of the original images (checked before matching:
         upper triangular, positive focal lengths).
         :meth:`match_pair`, then :func:`affcorr.estimate_relative_pose` with ``threshold``
-        (Sampson distance, pixels), ``seed`` and ``**options``, as :meth:`homography`.
+        (Sampson distance, pixels; default ``PIPELINE_DEFAULTS["pose_threshold"]``), ``seed``
+        and ``**options``, as :meth:`homography`.
 
         Returns:
             ``(pose, info)`` as :func:`affcorr.estimate_relative_pose`, or
             ``(pose, info, matches)``.
         """
-        # Invalid intrinsics raise the estimator's ValueError before any matching.
-        _native.normalize_correspondences(np.zeros((0, 8)), K1, K2)
-        res = self.match_pair(image_a, image_b)
-        t0 = time.perf_counter()
-        pose, info = estimate_relative_pose(
-            res.corrs, K1, K2, threshold=threshold, seed=seed, **self._with_quality(res, options)
-        )
-        res = self._timed(res, time.perf_counter() - t0)
-        return (pose, info, res) if return_matches else (pose, info)
+        out = self._runner.estimate(
+            "relative_pose", self._image(image_a), self._image(image_b), K1=K1, K2=K2,
+            threshold=threshold, seed=seed, **options
+        )  # fmt: skip
+        return self._estimated(out, _pose(out[0][0]), return_matches)
 
     def __repr__(self) -> str:
         return (

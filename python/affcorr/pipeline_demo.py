@@ -17,12 +17,13 @@ import numpy as np
 import affcorr
 from affcorr.data import data_dir, graffiti
 from affcorr.metrics import affine_errors, corner_error, correct_mask
+from affcorr.pipeline import PIPELINE_DEFAULTS
 
 
 def run(
     out: Path | None = Path("affcorr_demo.png"),
-    matcher: str = "xfeat-lighterglue",
-    max_keypoints: int = 2048,
+    matcher: str = PIPELINE_DEFAULTS["matcher"],
+    max_keypoints: int = PIPELINE_DEFAULTS["max_keypoints"],
 ) -> dict:
     """Runs the demo, prints its report and returns its figures."""
     d = data_dir() / "graffiti"

@@ -5,7 +5,7 @@ For each match ``x1 <-> x2``, a 32x32 grayscale patch is cut around ``x1`` in im
 ``(x + c - 15.5, y + r - 15.5)``, with pixel centres at integer coordinates and edge replication
 outside). The network gives each patch an orientation ``O`` and a scale ``S`` (softmax-mean
 decoding over the bins in its metadata) and the pair a residual shape ``A'' = (x0, x1, x2)``;
-the affine map of the AC is (docs/design.md §2, paper eq. 7)::
+the affine map of the AC is (docs/design.md §2, paper eq. 11)::
 
     A = S_AB * R(O_AB) * A'(A''),   O_AB = O_B - O_A,   S_AB = S_B / S_A.
 

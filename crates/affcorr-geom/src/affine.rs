@@ -1,4 +1,4 @@
-//! Affine synthesis and decomposition (docs/design.md §2, paper eqs. 4–7).
+//! Affine synthesis and decomposition (docs/design.md §2, paper eqs. 7–11).
 //!
 //! - `A = s · R(θ) · A′`, with s = √det A > 0, R(θ) = [[cos θ, −sin θ], [sin θ, cos θ]] and
 //!   A′ = [[a, 0], [b, 1/a]], a > 0: lower triangular, positive diagonal, det 1 (AffNet's form).
@@ -53,7 +53,7 @@ pub fn residual_shape_matrix(x: &[f64; 3]) -> Option<Mat2> {
     Some(Mat2::new(d0 * k, 0.0, x[1] * k, d2 * k))
 }
 
-/// A = s · R(θ) · A′(A″) for one map (paper eq. 7). `index` only labels errors.
+/// A = s · R(θ) · A′(A″) for one map (paper eq. 11). `index` only labels errors.
 ///
 /// ```
 /// use affcorr_geom::affine::{AffineShape, synthesize};

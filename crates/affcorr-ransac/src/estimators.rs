@@ -37,7 +37,7 @@ pub enum ScoringKind {
     /// The measured best per problem (default): MAGSAC++ for the fundamental matrix and the
     /// relative pose (more accurate than MSAC in the peer benchmark and at loose thresholds),
     /// MSAC for homographies (where MSAC's unit-weight least squares on the inliers is more
-    /// accurate; benches/results/peers_10scenes).
+    /// accurate; benches/results/peers_hf_repeat3/summary.md).
     #[default]
     Auto,
     /// MSAC, the truncated quadratic.
@@ -58,7 +58,7 @@ pub struct EstimatorOptions {
     pub sampler: SamplerKind,
     /// Per-correspondence quality for PROSAC (higher is better), e.g. matcher certainty.
     pub quality: Option<Vec<f64>>,
-    /// Scoring function. Default MSAC.
+    /// Scoring function. Default [`ScoringKind::Auto`].
     pub scoring: ScoringKind,
     /// Weight λ of the affine residual in scoring (0, the default: points only). See each
     /// problem's module for its units.

@@ -296,7 +296,7 @@ impl CheckedModel {
 }
 
 /// The intra-op thread count of `threads` (`None`: every core).
-pub(crate) fn resolve_threads(threads: Option<usize>) -> Result<usize> {
+pub fn resolve_threads(threads: Option<usize>) -> Result<usize> {
     match threads {
         Some(0) => Err(RunnerError::invalid(
             "threads",

@@ -45,29 +45,10 @@ pub enum RunnerError {
         /// ONNX Runtime's message.
         message: String,
     },
-    /// An image file that does not exist or cannot be opened.
-    #[error("cannot open image `{path}`: {reason}")]
-    ImageOpen {
-        /// The file path.
-        path: PathBuf,
-        /// The I/O error.
-        reason: String,
-    },
-    /// Image bytes that cannot be decoded (unknown format, truncated or corrupt data).
-    #[error("cannot decode image {source_name}: {reason}")]
-    ImageDecode {
-        /// The file path in backquotes, or `"from memory"`.
-        source_name: String,
-        /// The decoder's message.
-        reason: String,
-    },
-    /// A raw pixel buffer that does not describe an image (size mismatch, zero size, bad
-    /// channel count, non-finite values).
-    #[error("invalid image buffer: {reason}")]
-    ImageBuffer {
-        /// What is wrong.
-        reason: String,
-    },
+    /// An image problem: a file that cannot be opened or decoded, a bad buffer, bad patch
+    /// centres.
+    #[error(transparent)]
+    Image(#[from] affcorr_image::ImageError),
     /// A batched input with a bad shape or length, or a bad option.
     #[error("{what}: {reason}")]
     InvalidInput {
@@ -75,14 +56,6 @@ pub enum RunnerError {
         what: &'static str,
         /// What is wrong.
         reason: String,
-    },
-    /// NaN or infinity in an input row.
-    #[error("{what}[{row}] contains NaN or infinity")]
-    NonFinite {
-        /// Argument name.
-        what: &'static str,
-        /// Row index.
-        row: usize,
     },
     /// A model file that does not exist or cannot be read.
     #[error("cannot read model `{path}`: {reason}")]

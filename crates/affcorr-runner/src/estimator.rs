@@ -1,7 +1,7 @@
 //! Images and matched points in, affine correspondences out (docs/design.md §2, §6).
 //!
 //! For each match x1 ↔ x2, a 32×32 patch is cut around x1 in image A and around x2 in image B
-//! ([`crate::patches`]); the shape network gives each patch an orientation O and a scale S and
+//! ([`affcorr_image::patches`]); the shape network gives each patch an orientation O and a scale S and
 //! the pair a residual shape A″ ([`crate::shape`]); the AC's affine map is
 //!
 //! ```text
@@ -14,9 +14,9 @@
 use std::path::Path;
 
 use crate::error::{Result, RunnerError};
-use crate::image::GrayImage;
-use crate::patches::extract_named;
 use crate::shape::{ShapeModel, ShapeModelOptions, ShapePrediction};
+use affcorr_image::GrayImage;
+use affcorr_image::extract_named;
 
 /// A shape network ready to turn matches into ACs.
 #[derive(Debug)]

@@ -37,7 +37,7 @@ use rayon::prelude::*;
 
 use crate::contract::{self, BACKBONE_SPEC, CheckedModel};
 use crate::error::{Result, RunnerError};
-use crate::image::GrayImage;
+use affcorr_image::GrayImage;
 
 /// Channels of the keypoint logits: 8 × 8 cell positions and a dustbin.
 pub const KEYPOINT_CHANNELS: usize = 65;
@@ -907,7 +907,7 @@ pub fn dense_split(top_k: usize, split: &[f64]) -> Vec<usize> {
 }
 
 /// A [`GrayImage`]'s data, height and width.
-pub(crate) fn plane(img: &GrayImage) -> (&[f32], usize, usize) {
+pub fn plane(img: &GrayImage) -> (&[f32], usize, usize) {
     (img.data(), img.height(), img.width())
 }
 

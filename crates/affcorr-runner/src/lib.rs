@@ -1,11 +1,9 @@
-//! ONNX runner of affcorr's networks (docs/design.md §6): images and matches in, affine
-//! correspondences out.
+//! ONNX runner of affcorr's networks (docs/design.md §6): the matchers and the shape network.
+//! Images, patches and the affine refinement are `affcorr-image`'s; the end-to-end pipeline
+//! (with robust estimation) is `affcorr-pipeline`'s.
 //!
 //! - [`ort_env`]: loads ONNX Runtime at run time (`ORT_DYLIB_PATH` or [`init_ort`]); one
 //!   environment per process.
-//! - [`affine_refine`]: affine Lucas–Kanade refinement of ACs against the two images.
-//! - [`image`]: PNG/JPEG decoding and raw buffers to grayscale `f32` in [0, 1].
-//! - [`patches`]: 32×32 bilinear patches at sub-pixel centres, `(N, 1, 32, 32)`.
 //! - [`shape`]: the shape network's ONNX contract (`shape-v1`), batched inference and the
 //!   softmax-mean decoding of its orientation and scale logits.
 //! - [`estimator`]: the ACs A = S_AB · R(O_AB) · A′(A″) of matched points.
@@ -15,8 +13,8 @@
 //! - [`dense`]: dense matchers (DKM, RoMa) under `dense-warp-v1` and DKM's balanced sampling
 //!   of matches from their certainty map.
 //! - [`contract`]: the matcher models' ONNX contracts (docs/matchers.md), checked on loading.
-//! - [`pipeline`]: [`Pipeline`]: images → matches → ACs → homography / relative pose, timed per
-//!   stage.
+//! - [`matcher`]: [`Matcher`] names, the models each needs, and [`PointMatcher`], which loads
+//!   them and matches an image pair to points with certainties.
 //! - [`error`]: [`RunnerError`], which names what went wrong.
 //!
 //! Conventions are docs/design.md §2's: pixels (x, y) with x right and y down, pixel centres at
@@ -25,7 +23,8 @@
 //! # Example
 //!
 //! ```no_run
-//! use affcorr_runner::{GrayImage, ShapeEstimator, ShapeModelOptions, init_ort};
+//! use affcorr_image::GrayImage;
+//! use affcorr_runner::{ShapeEstimator, ShapeModelOptions, init_ort};
 //!
 //! // The library from the `onnxruntime` PyPI wheel, or leave it to ORT_DYLIB_PATH with `None`.
 //! init_ort(Some("/path/to/onnxruntime/capi/libonnxruntime.so.1.31.1".as_ref()))?;
@@ -38,30 +37,23 @@
 //! # Ok::<(), affcorr_runner::RunnerError>(())
 //! ```
 
-pub mod affine_refine;
 pub mod contract;
 pub mod dense;
 pub mod error;
 pub mod estimator;
 pub mod features;
-pub mod image;
+pub mod matcher;
 pub mod matching;
 pub mod ort_env;
-pub mod patches;
-pub mod pipeline;
 pub mod shape;
 
-pub use affine_refine::{AffineRefineOptions, AffineRefinement, refine_affine};
 pub use error::{Result, RunnerError};
 pub use estimator::{ShapeEstimate, ShapeEstimator};
-pub use image::{GrayImage, PixelData};
 pub use ort_env::{init_ort, ort_library};
-pub use patches::{PATCH_SIZE, Patches, extract_patches};
 pub use shape::{ShapeBins, ShapeModel, ShapeModelOptions, ShapeOutputs, ShapePrediction};
 
-pub use dense::{DenseMatcher, DenseSample, DenseWarp, RgbImage, SamplingOptions, balanced_sample};
+pub use contract::resolve_threads;
+pub use dense::{DenseMatcher, DenseSample, DenseWarp, SamplingOptions, balanced_sample};
 pub use features::{Backbone, BackboneConfig, BackboneMaps, DenseFeatures, SparseFeatures};
+pub use matcher::{Matcher, MatcherFiles, MatcherTimings, ModelRole, PointMatcher, PointMatches};
 pub use matching::{GlueMatches, LighterGlue, MnnMatches, RefineModel, mutual_nearest_neighbours};
-pub use pipeline::{
-    Estimated, ImageSource, Matcher, Matches, Pipeline, PipelineBuilder, PipelineError, Timings,
-};

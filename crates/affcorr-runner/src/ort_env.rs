@@ -52,36 +52,6 @@ pub fn ort_library() -> Option<&'static Path> {
     STATE.get().map(|s| s.library.as_path())
 }
 
-/// Finds an ONNX Runtime library for a checkout at `root`: `$ORT_DYLIB_PATH` (a relative path
-/// that does not exist from the current directory is taken relative to `root`, because cargo
-/// runs tests and benches in the package directory), else the `onnxruntime` wheel's library in
-/// `root/.venv` (`lib/python*/site-packages/onnxruntime/capi/libonnxruntime.so*`).
-pub fn locate_library(root: &Path) -> Option<PathBuf> {
-    if let Some(p) = std::env::var_os(ORT_DYLIB_ENV).filter(|p| !p.is_empty()) {
-        let p = PathBuf::from(p);
-        return Some(if p.is_relative() && !p.exists() {
-            root.join(p)
-        } else {
-            p
-        });
-    }
-    std::fs::read_dir(root.join(".venv/lib"))
-        .ok()?
-        .flatten()
-        .find_map(|d| {
-            let capi = d.path().join("site-packages/onnxruntime/capi");
-            std::fs::read_dir(capi)
-                .ok()?
-                .flatten()
-                .map(|f| f.path())
-                .find(|p| {
-                    p.file_name()
-                        .and_then(|n| n.to_str())
-                        .is_some_and(|n| n.starts_with("libonnxruntime.so"))
-                })
-        })
-}
-
 /// The default number of intra-op threads: every core [`std::thread::available_parallelism`]
 /// reports.
 pub fn default_threads() -> usize {

@@ -1,10 +1,10 @@
 //! The shape network: its ONNX contract, inference in batches, and the decoding of its logits
-//! into orientations and scales (docs/design.md §6, paper eqs. 4–7).
+//! into orientations and scales (docs/design.md §6, paper eqs. 7–11).
 //!
 //! # Contract `shape-v1`
 //!
 //! - Inputs `patch_a`, `patch_b`: float32 `(N, 1, 32, 32)`, grayscale in [0, 1] (the model
-//!   normalises each patch itself), cut as [`crate::patches`] describes.
+//!   normalises each patch itself), cut as [`affcorr_image::patches`] describes.
 //! - Outputs `angle_logits_a`, `angle_logits_b`: float32 `(N, Kθ)`; `scale_logits_a`,
 //!   `scale_logits_b`: float32 `(N, Ks)`; `residual_shape`: float32 `(N, 3)`, the residual
 //!   shape A″ = (x0, x1, x2) of the pair, with 1 + x0 > 0 and 1 + x2 > 0.
@@ -35,7 +35,7 @@ use rayon::prelude::*;
 
 use crate::contract;
 use crate::error::{Result, RunnerError};
-use crate::patches::{PATCH_LEN, PATCH_SIZE, Patches};
+use affcorr_image::{PATCH_LEN, PATCH_SIZE, Patches};
 
 /// The contract name in the `affcorr.contract` metadata.
 pub const SHAPE_CONTRACT: &str = "shape-v1";
@@ -223,7 +223,7 @@ impl ShapePrediction {
     }
 
     /// The affine maps A = S_AB · R(O_AB) · A′(A″), row-major (a11, a12, a21, a22), with
-    /// O_AB = O_B − O_A and S_AB = S_B / S_A (paper eq. 7, [`affcorr_geom::affine::synthesize`]).
+    /// O_AB = O_B − O_A and S_AB = S_B / S_A (paper eq. 9, [`affcorr_geom::affine::synthesize`]).
     pub fn affine(&self) -> Result<Vec<[f64; 4]>> {
         (0..self.len())
             .map(|i| {

@@ -8,58 +8,14 @@
 
 mod common;
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
-use std::sync::OnceLock;
+use std::path::Path;
 
 use affcorr_geom::{Mat3, Vec3};
-use affcorr_ransac::EstimatorOptions;
-use affcorr_runner::{
-    DenseMatcher, DenseWarp, Matcher, Pipeline, RgbImage, RunnerError, SamplingOptions,
-    balanced_sample,
-};
+use affcorr_image::RgbImage;
+use affcorr_runner::{DenseMatcher, DenseWarp, RunnerError, SamplingOptions, balanced_sample};
 
 const W: usize = 800;
 const H: usize = 640;
-
-fn tmp() -> &'static Path {
-    static DIR: OnceLock<tempfile::TempDir> = OnceLock::new();
-    DIR.get_or_init(|| tempfile::tempdir().expect("a temporary directory"))
-        .path()
-}
-
-/// Writes a test model with `args` added to the script's command line.
-fn test_model(name: &str, args: &[&str]) -> PathBuf {
-    let out = tmp().join(name);
-    if out.is_file() {
-        return out;
-    }
-    let python = common::root().join(".venv/bin/python");
-    let h: Vec<String> = common::graffiti_homography()
-        .iter()
-        .map(|v| v.to_string())
-        .collect();
-    let status = Command::new(&python)
-        .args(["-m", "affcorr.export.dense_test_model"])
-        .arg(&out)
-        .arg("--homography")
-        .args(&h)
-        .args(["--size-a", "800", "640", "--size-b", "800", "640"])
-        .args(args)
-        .output()
-        .unwrap_or_else(|e| {
-            panic!(
-                "cannot run {} (run scripts/setup.sh with AFFCORR_WITH_TORCH=1 for onnx): {e}",
-                python.display()
-            )
-        });
-    assert!(
-        status.status.success(),
-        "dense_test_model failed (needs the onnx package: AFFCORR_WITH_TORCH=1 scripts/setup.sh): {}",
-        String::from_utf8_lossy(&status.stderr)
-    );
-    out
-}
 
 fn ground_truth() -> Mat3 {
     Mat3::from_row_slice(&common::graffiti_homography())
@@ -84,7 +40,8 @@ fn run_on_graffiti(model: &Path) -> DenseWarp {
 #[test]
 fn the_contract_accepts_the_test_model_and_rejects_broken_ones() {
     common::init();
-    let m = DenseMatcher::load(test_model("ok.onnx", &[]), Some(1)).unwrap();
+    let m =
+        DenseMatcher::load(affcorr_devtools::dense_test_model("ok.onnx", &[]), Some(1)).unwrap();
     assert_eq!(
         m.metadata().get("affcorr.contract").map(String::as_str),
         Some("dense-warp-v1")
@@ -92,13 +49,13 @@ fn the_contract_accepts_the_test_model_and_rejects_broken_ones() {
     // Dynamic axes: image A's size; fixed axes: the graph's.
     assert_eq!(m.input_size(W, H), (H, W));
     let fixed = DenseMatcher::load(
-        test_model("fixed.onnx", &["--input-size", "120", "160"]),
+        affcorr_devtools::dense_test_model("fixed.onnx", &["--input-size", "120", "160"]),
         Some(1),
     )
     .unwrap();
     assert_eq!(fixed.input_size(W, H), (120, 160));
     let nominal = DenseMatcher::load(
-        test_model(
+        affcorr_devtools::dense_test_model(
             "nominal.onnx",
             &["--meta", "affcorr.nominal_size=[96, 128]"],
         ),
@@ -117,7 +74,8 @@ fn the_contract_accepts_the_test_model_and_rejects_broken_ones() {
         ("wrong-contract", "features-backbone-v1"),
         ("no-contract", "affcorr.contract is missing"),
     ] {
-        let path = test_model(&format!("{variant}.onnx"), &["--variant", variant]);
+        let path =
+            affcorr_devtools::dense_test_model(&format!("{variant}.onnx"), &["--variant", variant]);
         let e = DenseMatcher::load(&path, Some(1)).unwrap_err();
         let msg = e.to_string();
         assert!(
@@ -132,7 +90,10 @@ fn the_contract_accepts_the_test_model_and_rejects_broken_ones() {
         );
         assert!(msg.contains(says), "{variant}: {msg}");
     }
-    let bad = test_model("bad-nominal.onnx", &["--meta", "affcorr.nominal_size=[96]"]);
+    let bad = affcorr_devtools::dense_test_model(
+        "bad-nominal.onnx",
+        &["--meta", "affcorr.nominal_size=[96]"],
+    );
     let e = DenseMatcher::load(bad, Some(1)).unwrap_err();
     assert!(e.to_string().contains("nominal_size"), "{e}");
     // A model of another contract.
@@ -146,7 +107,7 @@ fn the_contract_accepts_the_test_model_and_rejects_broken_ones() {
 
 #[test]
 fn the_warp_is_the_homography_in_dkm_coordinates() {
-    let warp = run_on_graffiti(&test_model("ok.onnx", &[]));
+    let warp = run_on_graffiti(&affcorr_devtools::dense_test_model("ok.onnx", &[]));
     assert_eq!((warp.height, warp.width), (H, W));
     let gt = ground_truth();
     let (mut inside, mut checked) = (0, 0);
@@ -168,7 +129,10 @@ fn the_warp_is_the_homography_in_dkm_coordinates() {
     }
     assert!(inside > checked / 2, "{inside} of {checked} inside B");
     // Input at 120×160: the grid is coarser, the warp the same map.
-    let coarse = run_on_graffiti(&test_model("fixed.onnx", &["--input-size", "120", "160"]));
+    let coarse = run_on_graffiti(&affcorr_devtools::dense_test_model(
+        "fixed.onnx",
+        &["--input-size", "120", "160"],
+    ));
     assert_eq!((coarse.height, coarse.width), (120, 160));
     let k = 60 * 160 + 80;
     let (a, b) = coarse.to_pixels(&[k], (W, H), (W, H));
@@ -178,7 +142,7 @@ fn the_warp_is_the_homography_in_dkm_coordinates() {
 
 #[test]
 fn sampling_is_seeded_balanced_and_confident() {
-    let warp = run_on_graffiti(&test_model("ok.onnx", &[]));
+    let warp = run_on_graffiti(&affcorr_devtools::dense_test_model("ok.onnx", &[]));
     let o = SamplingOptions {
         num: 1000,
         seed: 3,
@@ -225,87 +189,4 @@ fn sampling_is_seeded_balanced_and_confident() {
         empty.is_empty(),
         "blocks inside the overlap with < 5 matches: {empty:?}"
     );
-}
-
-fn dense_pipeline(max_matches: usize) -> Pipeline {
-    common::init();
-    Pipeline::builder()
-        .dense_matcher(test_model("ok.onnx", &[]))
-        .shape_model(common::bundled_model())
-        .max_matches(max_matches)
-        .threads(2)
-        // The tests check the matcher's own points; the refinement would move them.
-        .affine_refinement(None)
-        .build()
-        .unwrap()
-}
-
-#[test]
-fn the_pipeline_with_the_ground_truth_as_matcher_gives_exact_points() {
-    let p = dense_pipeline(400);
-    assert_eq!(p.matcher(), Matcher::Dense);
-    assert!(p.backbone().is_none() && p.dense_matcher().is_some());
-    let dir = common::root().join("data/graffiti");
-    let (a, b) = (dir.join("graf1.png"), dir.join("graf3.png"));
-    let m = p.match_pair(&a, &b).unwrap();
-    assert_eq!(m.len(), 400);
-    assert_eq!(m.certainty.len(), 400);
-    let gt = ground_truth();
-    let worst = m
-        .corrs
-        .iter()
-        .map(|c| {
-            let q = project(&gt, [c[0], c[1]]);
-            ((q[0] - c[2]).powi(2) + (q[1] - c[3]).powi(2)).sqrt()
-        })
-        .fold(0.0, f64::max);
-    assert!(worst < 0.5, "worst transfer error {worst} px");
-    assert!(m.corrs.iter().all(|c| c[4] * c[7] - c[5] * c[6] > 0.0));
-    assert!(m.timings.matcher > std::time::Duration::ZERO);
-    // Seeded: the same ACs again.
-    assert_eq!(p.match_pair(&a, &b).unwrap().corrs, m.corrs);
-
-    let mut opts = EstimatorOptions::default();
-    opts.ransac.threshold = 2.0;
-    let est = p.homography(&a, &b, &opts).unwrap();
-    let corners = [
-        [0.0, 0.0],
-        [W as f64 - 1.0, 0.0],
-        [W as f64 - 1.0, H as f64 - 1.0],
-        [0.0, H as f64 - 1.0],
-    ];
-    let err = corners
-        .iter()
-        .map(|&c| {
-            let (p, q) = (project(&est.estimate.model, c), project(&gt, c));
-            ((p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2)).sqrt()
-        })
-        .sum::<f64>()
-        / 4.0;
-    eprintln!(
-        "dense GT: worst point error {worst:.2e} px, H corner error {err:.2e} px, {} / {} inliers; {}",
-        est.estimate.num_inliers,
-        est.matches.len(),
-        est.matches.timings
-    );
-    assert!(err < 0.1, "mean corner error {err} px");
-}
-
-#[test]
-fn a_dense_pipeline_names_its_missing_model() {
-    common::init();
-    let e = Pipeline::builder()
-        .matcher(Matcher::Dense)
-        .shape_model(common::bundled_model())
-        .build()
-        .unwrap_err();
-    assert!(e.to_string().contains("dense_matcher"), "{e}");
-    let e = Pipeline::builder()
-        .dense_matcher("/nonexistent/dkm.onnx")
-        .shape_model(common::bundled_model())
-        .build()
-        .unwrap_err();
-    assert!(matches!(e, RunnerError::ModelOpen { .. }), "{e}");
-    assert!(e.to_string().contains("dkm.onnx"), "{e}");
-    assert_eq!("dense".parse::<Matcher>().unwrap(), Matcher::Dense);
 }

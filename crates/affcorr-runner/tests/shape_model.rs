@@ -10,9 +10,8 @@ mod common;
 use std::f64::consts::PI;
 
 use affcorr_geom::affine::{AffineShape, synthesize};
-use affcorr_runner::{
-    GrayImage, Patches, RunnerError, ShapeEstimator, ShapeModel, ShapeModelOptions,
-};
+use affcorr_image::{GrayImage, ImageError, Patches};
+use affcorr_runner::{RunnerError, ShapeEstimator, ShapeModel, ShapeModelOptions};
 use rand::{Rng, SeedableRng};
 
 const LEN: usize = 32 * 32;
@@ -180,8 +179,8 @@ fn estimate_synthesises_acs_from_the_patches() {
     let e = est.estimate(&img_a, &img_b, &x1, &x2).unwrap();
     assert_eq!(e.corrs.len(), 50);
 
-    let pa = affcorr_runner::extract_patches(&img_a, &x1).unwrap();
-    let pb = affcorr_runner::extract_patches(&img_b, &x2).unwrap();
+    let pa = affcorr_image::extract_patches(&img_a, &x1).unwrap();
+    let pb = affcorr_image::extract_patches(&img_b, &x2).unwrap();
     let p = est.model().predict(&pa, &pb).unwrap();
     assert_eq!(p.orientation_a, e.orientation_a);
     assert_eq!(p.scale_b, e.scale_b);
@@ -225,7 +224,10 @@ fn bad_estimator_inputs_are_named() {
         )
         .unwrap_err();
     assert!(
-        matches!(e, RunnerError::NonFinite { what: "x2", row: 1 }),
+        matches!(
+            e,
+            RunnerError::Image(ImageError::NonFinite { what: "x2", row: 1 })
+        ),
         "{e:?}"
     );
     let e = est
@@ -235,7 +237,7 @@ fn bad_estimator_inputs_are_named() {
     assert_invalid(&e, "patch_b");
     assert!(matches!(
         Patches::from_vec(vec![0.0; 1000]),
-        Err(RunnerError::InvalidInput {
+        Err(ImageError::InvalidInput {
             what: "patches",
             ..
         })

@@ -4,12 +4,13 @@
 //! - [`geom`]: conventions, AC synthesis/decomposition, Sampson distances, epipolar utilities.
 //! - [`solvers`]: minimal and non-minimal solvers.
 //! - [`ransac`]: robust estimation of H, F and relative pose from points or ACs.
-//! - [`runner`]: ONNX Runtime runner: image decoding, the XFeat matchers (MNN, XFeat*,
-//!   LighterGlue), dense `dense-warp-v1` matchers (DKM, RoMa exports) with DKM's balanced
-//!   sampling, 32×32 patch extraction and the shape network (images + matches → ACs
-//!   `A = S_AB·R(O_AB)·A′(A″)`).
-//! - [`Pipeline`]: images → matches → ACs → homography / relative pose, timed per stage
-//!   (re-exported from [`runner::pipeline`]).
+//! - [`image`]: images (decoding, gray and colour buffers, resizing), 32×32 patches, and the
+//!   affine Lucas–Kanade refinement of ACs.
+//! - [`runner`]: the ONNX networks: the XFeat matchers (MNN, XFeat*, LighterGlue), dense
+//!   `dense-warp-v1` matchers (DKM, RoMa exports) with DKM's balanced sampling, and the shape
+//!   network (images + matches → ACs `A = S_AB·R(O_AB)·A′(A″)`).
+//! - [`pipeline`]: [`Pipeline`]: images → matches → ACs → homography, fundamental matrix or
+//!   relative pose, timed per stage, with one set of [`pipeline::defaults`].
 //!
 //! ```
 //! use affcorr::geom::{affine::{AffineShape, synthesize, decompose}};
@@ -19,11 +20,13 @@
 //! ```
 
 pub use affcorr_geom as geom;
+pub use affcorr_image as image;
+pub use affcorr_pipeline as pipeline;
 pub use affcorr_ransac as ransac;
 pub use affcorr_runner as runner;
 pub use affcorr_solvers as solvers;
 
-pub use affcorr_runner::pipeline::{
-    Estimated, ImageSource, Matcher, Matches, Pipeline, PipelineBuilder, PipelineError, Timings,
+pub use affcorr_pipeline::{
+    Estimated, Geometry, ImageSource, Matcher, Matches, Pipeline, PipelineBuilder, PipelineError,
+    Timings,
 };
-pub use affcorr_runner::{DenseMatcher, RgbImage, SamplingOptions};

@@ -1,4 +1,4 @@
-//! Bad-input battery of the public Rust API, through the facade (issue 8; docs/reliability.md).
+//! Bad-input battery of the public Rust API, through the facade (docs/reliability.md).
 //!
 //! Every case asserts the typed error variant *and* what its message names, or the documented
 //! sane behaviour (a solver's 0 models, an estimator's `NoModel`). Cases that need ONNX Runtime
@@ -6,7 +6,7 @@
 //! skipped; the ORT library itself (missing, not ONNX Runtime) is tested in `bad_input_ort.rs`,
 //! a binary that never loads a working library.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use affcorr::geom::affine::{
     AffineShape, decompose, decompose_affine, laf_to_affine, synthesize_affine,
@@ -16,13 +16,12 @@ use affcorr::geom::epipolar::pose_from_essential;
 use affcorr::geom::homography::correspondences_from_homography;
 use affcorr::geom::sampson::sampson_point_batch;
 use affcorr::geom::{AffineCorrespondence, GeomError, Mat2, Mat3, Vec2, Vec3};
+use affcorr::image::{GrayImage, ImageError, PixelData, extract_patches};
 use affcorr::ransac::{
     Correspondences, EstimatorOptions, RansacError, SampleKind, SamplerKind, estimate_fundamental,
     estimate_homography, estimate_homography_batch, estimate_relative_pose,
 };
-use affcorr::runner::{
-    GrayImage, PixelData, RunnerError, ShapeEstimator, ShapeModelOptions, extract_patches,
-};
+use affcorr::runner::{RunnerError, ShapeEstimator, ShapeModelOptions};
 use affcorr::solvers::essential::essential_2ac;
 use affcorr::solvers::fundamental::{fundamental_3ac, fundamental_7pt, fundamental_8pt};
 use affcorr::solvers::homography::{homography_2ac, homography_4pt, homography_lsq};
@@ -520,7 +519,7 @@ fn bad_images_are_decode_errors_not_aborts() {
     for (w, h, depth, colour, fragment) in cases {
         let r = GrayImage::decode(&png_header(w, h, depth, colour));
         assert!(
-            matches!(r, Err(RunnerError::ImageDecode { .. })),
+            matches!(r, Err(ImageError::Decode { .. })),
             "{w}x{h}: {r:?}"
         );
         message(r, &["from memory", fragment]);
@@ -542,7 +541,7 @@ fn patch_centres_must_be_finite() {
     let img = GrayImage::new(8, 8, vec![0.5; 64]).unwrap();
     let r = extract_patches(&img, &[[1.0, 2.0], [f64::NEG_INFINITY, 0.0]]);
     assert!(
-        matches!(r, Err(RunnerError::NonFinite { row: 1, .. })),
+        matches!(r, Err(ImageError::NonFinite { row: 1, .. })),
         "{r:?}"
     );
     // Far outside the image is fine: edges are replicated.
@@ -553,12 +552,12 @@ fn patch_centres_must_be_finite() {
 // --- models (need ONNX Runtime) -----------------------------------------------------------------
 
 fn root() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+    affcorr_devtools::repo_root()
 }
 
 /// Loads ONNX Runtime for the model tests, or says why they are skipped.
 fn ort() -> bool {
-    match affcorr::runner::ort_env::locate_library(&root()) {
+    match affcorr_devtools::locate_ort_library(&root()) {
         Some(lib) => affcorr::runner::init_ort(Some(&lib)).is_ok(),
         None => {
             eprintln!("skipped: no ONNX Runtime library (set ORT_DYLIB_PATH)");
@@ -618,7 +617,13 @@ fn missing_corrupt_and_wrong_contract_models_are_typed_errors() {
     message(r, &["x2", "2 points, but x1 has 3"]);
     let r = echo.estimate(&img, &img, &[[1.0, f64::NAN]], &[[1.0, 1.0]]);
     assert!(
-        matches!(r, Err(RunnerError::NonFinite { what: "x1", row: 0 })),
+        matches!(
+            r,
+            Err(RunnerError::Image(ImageError::NonFinite {
+                what: "x1",
+                row: 0
+            }))
+        ),
         "{r:?}"
     );
     // No matches: no ACs.
@@ -644,7 +649,7 @@ fn pipeline_builder_names_what_is_missing_or_invalid() {
     assert!(
         matches!(
             r,
-            Err(RunnerError::InvalidInput {
+            Err(PipelineError::InvalidInput {
                 what: "backbone_model",
                 ..
             })
@@ -656,7 +661,10 @@ fn pipeline_builder_names_what_is_missing_or_invalid() {
         .models_dir(dir.path())
         .threads(1)
         .build();
-    assert!(matches!(r, Err(RunnerError::ModelOpen { .. })), "{r:?}");
+    assert!(
+        matches!(r, Err(PipelineError::Runner(RunnerError::ModelOpen { .. }))),
+        "{r:?}"
+    );
     message(r, &["xfeat_backbone.onnx"]);
     // Images are checked per pair: a missing file names itself.
     let models = root().join("python/affcorr/models");
@@ -667,7 +675,7 @@ fn pipeline_builder_names_what_is_missing_or_invalid() {
             .max_keypoints(64)
             .build()
             .unwrap();
-        let r: Result<_, PipelineError> = p.match_pair("nope.png", "nope.png").map_err(Into::into);
+        let r = p.match_pair("nope.png", "nope.png");
         message(r, &["nope.png"]);
         // Over 64 MP at the working resolution: an error naming max_side, not an OOM abort.
         let huge = GrayImage::new(8200, 8200, vec![0.5; 8200 * 8200]).unwrap();
@@ -676,7 +684,7 @@ fn pipeline_builder_names_what_is_missing_or_invalid() {
         assert!(
             matches!(
                 r,
-                Err(RunnerError::InvalidInput {
+                Err(PipelineError::InvalidInput {
                     what: "image_b",
                     ..
                 })

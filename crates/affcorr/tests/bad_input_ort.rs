@@ -1,4 +1,4 @@
-//! Bad ONNX Runtime libraries (issue 8): missing, not ONNX Runtime, too old, or with a broken C
+//! Bad ONNX Runtime libraries: missing, not ONNX Runtime, too old, or with a broken C
 //! API. Each is a typed [`RunnerError`], never a panic or an abort.
 //!
 //! Its own test binary, because ONNX Runtime is loaded once per process: nothing here loads a

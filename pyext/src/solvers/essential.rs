@@ -4,7 +4,7 @@
 //! sample (repeated points, det A ≤ 0, rank-deficient system) gives an empty list. Bad shapes and
 //! NaN/infinity raise `ValueError` naming the argument.
 
-use super::homography::{models, read_acs, read_points, same_length};
+use super::inputs::{models, read_acs, read_points, same_length};
 use affcorr::geom::Mat3;
 use affcorr::solvers::essential as e;
 use numpy::PyArrayDyn;

@@ -3,7 +3,7 @@
 //! plane, coincident points, det A ≤ 0, rank-deficient system) gives an empty list. Bad shapes
 //! and NaN/infinity raise `ValueError` naming the argument.
 
-use super::homography::{models, read_acs, read_points, same_length};
+use super::inputs::{models, read_acs, read_points, same_length};
 use affcorr::geom::Mat3;
 use affcorr::solvers::fundamental as f;
 use numpy::PyArrayDyn;

@@ -5,6 +5,7 @@ use pyo3::prelude::*;
 mod essential;
 mod fundamental;
 mod homography;
+mod inputs;
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     homography::register(m)?;

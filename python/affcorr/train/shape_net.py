@@ -11,7 +11,7 @@ Paper §3.2.2, docs/design.md §2 and §6. One module, one ONNX graph:
   (:func:`decode_orientation`, :func:`decode_scale`); the runner does the same from the bin
   centres stored in the ONNX metadata. Patch B of a pair whose content is patch A's rotated by
   phi and magnified by s gets O_B - O_A = phi and S_B / S_A = s, hence A = S R(O) A' with
-  O = O_B - O_A, S = S_B / S_A (paper eqs. 4-7).
+  O = O_B - O_A, S = S_B / S_A (paper eqs. 7-11).
 - **E_aff** sees patch A and patch B resampled into A's frame by the similarity (O, S) that E_os
   predicted, and regresses the residual shape A'' = (x0, x1, x2). ``1 + x0`` and ``1 + x2`` are
   exponentials, so A'' is always in the domain of docs/design.md §2's det-normalisation.

@@ -55,8 +55,8 @@
 use nalgebra::{Matrix2, SMatrix, SVector};
 use rayon::prelude::*;
 
-use crate::error::{Result, RunnerError};
-use crate::image::GrayImage;
+use crate::error::{ImageError, Result};
+use crate::gray::GrayImage;
 
 type Mat6 = SMatrix<f64, 6, 6>;
 type Vec6 = SVector<f64, 6>;
@@ -109,7 +109,7 @@ impl Default for AffineRefineOptions {
 impl AffineRefineOptions {
     fn validate(&self) -> Result<()> {
         if !(1..=64).contains(&self.radius) {
-            return Err(RunnerError::invalid(
+            return Err(ImageError::invalid(
                 "radius",
                 format!("must be in 1..=64 pixels, got {}", self.radius),
             ));
@@ -120,7 +120,7 @@ impl AffineRefineOptions {
                 .iter()
                 .any(|s| !(s.is_finite() && (0.0..=16.0).contains(s)))
         {
-            return Err(RunnerError::invalid(
+            return Err(ImageError::invalid(
                 "blur_sigmas",
                 format!(
                     "must be a non-empty list of σ in [0, 16] pixels, got {:?}",
@@ -129,16 +129,16 @@ impl AffineRefineOptions {
             ));
         }
         if self.iterations == 0 {
-            return Err(RunnerError::invalid("iterations", "must be at least 1"));
+            return Err(ImageError::invalid("iterations", "must be at least 1"));
         }
         if !(self.max_shift_std > 0.0) {
-            return Err(RunnerError::invalid(
+            return Err(ImageError::invalid(
                 "max_shift_std",
                 format!("must be positive pixels, got {}", self.max_shift_std),
             ));
         }
         if !(-1.0..=1.0).contains(&self.min_zncc) {
-            return Err(RunnerError::invalid(
+            return Err(ImageError::invalid(
                 "min_zncc",
                 format!("must be in [-1, 1], got {}", self.min_zncc),
             ));
@@ -170,10 +170,10 @@ pub fn refine_affine(
 ) -> Result<AffineRefinement> {
     options.validate()?;
     if let Some(row) = corrs.iter().position(|c| c.iter().any(|v| !v.is_finite())) {
-        return Err(RunnerError::NonFinite { what: "corrs", row });
+        return Err(ImageError::NonFinite { what: "corrs", row });
     }
     if let Some(row) = corrs.iter().position(|c| c[4] * c[7] - c[5] * c[6] <= 0.0) {
-        return Err(RunnerError::invalid(
+        return Err(ImageError::invalid(
             "corrs",
             format!("row {row}: the affine map has det A <= 0"),
         ));

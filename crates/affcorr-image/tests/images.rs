@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use affcorr_runner::{GrayImage, PixelData, RunnerError};
+use affcorr_image::{GrayImage, ImageError, PixelData};
 use image::{ImageBuffer, Luma, LumaA, Rgb, Rgba};
 
 const W: u32 = 7;
@@ -166,7 +166,7 @@ fn bad_files_are_typed_errors_naming_the_file() {
     let missing = dir.path().join("missing.png");
     let e = GrayImage::open(&missing).unwrap_err();
     assert!(
-        matches!(e, RunnerError::ImageOpen { ref path, .. } if *path == missing),
+        matches!(e, ImageError::Open { ref path, .. } if *path == missing),
         "{e:?}"
     );
     assert!(e.to_string().contains("missing.png"));
@@ -174,7 +174,7 @@ fn bad_files_are_typed_errors_naming_the_file() {
     let garbage = dir.path().join("garbage.png");
     std::fs::write(&garbage, b"this is not an image at all").unwrap();
     let e = GrayImage::open(&garbage).unwrap_err();
-    assert!(matches!(e, RunnerError::ImageDecode { .. }), "{e:?}");
+    assert!(matches!(e, ImageError::Decode { .. }), "{e:?}");
     assert!(
         e.to_string().contains("garbage.png") && e.to_string().contains("unrecognised"),
         "{e}"
@@ -184,7 +184,7 @@ fn bad_files_are_typed_errors_naming_the_file() {
     std::fs::write(&empty, b"").unwrap();
     assert!(matches!(
         GrayImage::open(&empty),
-        Err(RunnerError::ImageDecode { .. })
+        Err(ImageError::Decode { .. })
     ));
 
     // Truncated PNG: the header is fine, the data stops half-way.
@@ -195,7 +195,7 @@ fn bad_files_are_typed_errors_naming_the_file() {
     let truncated = dir.path().join("truncated.png");
     std::fs::write(&truncated, &bytes[..bytes.len() / 2]).unwrap();
     let e = GrayImage::open(&truncated).unwrap_err();
-    assert!(matches!(e, RunnerError::ImageDecode { .. }), "{e:?}");
+    assert!(matches!(e, ImageError::Decode { .. }), "{e:?}");
     assert!(e.to_string().contains("truncated.png"), "{e}");
 
     // Truncated JPEG.
@@ -205,12 +205,12 @@ fn bad_files_are_typed_errors_naming_the_file() {
     let truncated = dir.path().join("truncated.jpg");
     std::fs::write(&truncated, &bytes_jpg[..bytes_jpg.len() / 3]).unwrap();
     let e = GrayImage::open(&truncated).unwrap_err();
-    assert!(matches!(e, RunnerError::ImageDecode { .. }), "{e:?}");
+    assert!(matches!(e, ImageError::Decode { .. }), "{e:?}");
 
     // A directory is not an image.
     assert!(matches!(
         GrayImage::open(dir.path()),
-        Err(RunnerError::ImageOpen { .. })
+        Err(ImageError::Open { .. })
     ));
     // From memory, the source is named as such.
     let e = GrayImage::decode(&bytes[..20]).unwrap_err();
@@ -230,8 +230,8 @@ fn raw_buffers() {
         &[0.1; 4]
     );
 
-    let err = |r: Result<GrayImage, RunnerError>| match r {
-        Err(e @ RunnerError::ImageBuffer { .. }) => e.to_string(),
+    let err = |r: Result<GrayImage, ImageError>| match r {
+        Err(e @ ImageError::Buffer { .. }) => e.to_string(),
         other => panic!("expected ImageBuffer, got {other:?}"),
     };
     assert!(err(GrayImage::from_raw(2, 2, 3, PixelData::U8(&[0; 11]))).contains("expected 12"));

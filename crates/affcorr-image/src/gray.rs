@@ -5,15 +5,15 @@
 //! - Colour to gray: luma = 0.299 R + 0.587 G + 0.114 B (ITU-R BT.601, as OpenCV and PIL).
 //!   Alpha is ignored (not premultiplied, not composited).
 //! - Unreadable, truncated or corrupt files (including JPEGs cut short, which the decoder
-//!   itself would fill with grey) are [`RunnerError::ImageOpen`] /
-//!   [`RunnerError::ImageDecode`]; bad raw buffers are [`RunnerError::ImageBuffer`].
+//!   itself would fill with grey) are [`ImageError::Open`] /
+//!   [`ImageError::Decode`]; bad raw buffers are [`ImageError::Buffer`].
 
 use std::io::Cursor;
 use std::path::Path;
 
 use image::{DynamicImage, ImageReader};
 
-use crate::error::{Result, RunnerError};
+use crate::error::{ImageError, Result};
 
 /// The BT.601 luma weights of R, G and B.
 pub const LUMA_WEIGHTS: [f32; 3] = [0.299, 0.587, 0.114];
@@ -66,7 +66,7 @@ impl GrayImage {
     /// 3 RGB, 4 RGBA.
     ///
     /// ```
-    /// use affcorr_runner::{GrayImage, PixelData};
+    /// use affcorr_image::{GrayImage, PixelData};
     /// // One white and one pure-red RGB pixel.
     /// let img = GrayImage::from_raw(2, 1, 3, PixelData::U8(&[255, 255, 255, 255, 0, 0])).unwrap();
     /// assert!((img.get(0, 0) - 1.0).abs() < 1e-6 && (img.get(1, 0) - 0.299).abs() < 1e-6);
@@ -78,7 +78,7 @@ impl GrayImage {
         pixels: PixelData<'_>,
     ) -> Result<Self> {
         if !(1..=4).contains(&channels) {
-            return Err(RunnerError::ImageBuffer {
+            return Err(ImageError::Buffer {
                 reason: format!(
                     "{channels} channels per pixel; expected 1 (gray), 2 (gray + alpha), 3 (RGB) \
                      or 4 (RGBA)"
@@ -146,18 +146,18 @@ impl GrayImage {
 
 fn check_size(width: usize, height: usize, channels: usize, len: usize) -> Result<()> {
     if width == 0 || height == 0 {
-        return Err(RunnerError::ImageBuffer {
+        return Err(ImageError::Buffer {
             reason: format!("the image is empty ({width}×{height})"),
         });
     }
     let expected = width
         .checked_mul(height)
         .and_then(|n| n.checked_mul(channels))
-        .ok_or_else(|| RunnerError::ImageBuffer {
+        .ok_or_else(|| ImageError::Buffer {
             reason: format!("{width}×{height}×{channels} overflows"),
         })?;
     if len != expected {
-        return Err(RunnerError::ImageBuffer {
+        return Err(ImageError::Buffer {
             reason: format!(
                 "{len} samples for a {width}×{height} image with {channels} channel(s); expected \
                  {expected}"
@@ -167,8 +167,8 @@ fn check_size(width: usize, height: usize, channels: usize, len: usize) -> Resul
     Ok(())
 }
 
-fn non_finite_pixel(i: usize, width: usize) -> RunnerError {
-    RunnerError::ImageBuffer {
+fn non_finite_pixel(i: usize, width: usize) -> ImageError {
+    ImageError::Buffer {
         reason: format!(
             "pixel (x = {}, y = {}) is NaN or infinite",
             i % width,
@@ -204,8 +204,8 @@ fn decode(bytes: &[u8], source_name: &str) -> Result<GrayImage> {
 /// Reads and decodes an image file in the decoder's pixel type, with the checks of
 /// [`GrayImage::open`] (for the dense matcher, which wants the colour too); also returns the
 /// name errors use for it.
-pub(crate) fn open_dynamic(path: &Path) -> Result<(DynamicImage, String)> {
-    let bytes = std::fs::read(path).map_err(|e| RunnerError::ImageOpen {
+pub fn open_dynamic(path: &Path) -> Result<(DynamicImage, String)> {
+    let bytes = std::fs::read(path).map_err(|e| ImageError::Open {
         path: path.to_path_buf(),
         reason: e.to_string(),
     })?;
@@ -213,8 +213,8 @@ pub(crate) fn open_dynamic(path: &Path) -> Result<(DynamicImage, String)> {
     Ok((decode_dynamic(&bytes, &name)?, name))
 }
 
-fn decode_error(source_name: &str, reason: String) -> RunnerError {
-    RunnerError::ImageDecode {
+fn decode_error(source_name: &str, reason: String) -> ImageError {
+    ImageError::Decode {
         source_name: source_name.to_string(),
         reason,
     }
@@ -259,7 +259,7 @@ fn too_large(bytes: &[u8], e: &image::ImageError) -> String {
 }
 
 /// A decoded image to gray (BT.601 luma for colour).
-pub(crate) fn gray_from_dynamic(img: &DynamicImage, source_name: &str) -> Result<GrayImage> {
+pub fn gray_from_dynamic(img: &DynamicImage, source_name: &str) -> Result<GrayImage> {
     let decode_error = |reason: String| decode_error(source_name, reason);
     let (w, h) = (img.width() as usize, img.height() as usize);
     let (channels, pixels) = match img {

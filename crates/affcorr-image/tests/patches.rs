@@ -1,7 +1,7 @@
 //! Patch extraction against an independent reference: bilinear interpolation of the image padded
 //! by edge replication (the implementation clamps coordinates instead).
 
-use affcorr_runner::{GrayImage, PATCH_SIZE, RunnerError, extract_patches};
+use affcorr_image::{GrayImage, ImageError, PATCH_SIZE, extract_patches};
 use rand::{Rng, SeedableRng};
 
 fn random_image(w: usize, h: usize, seed: u64) -> GrayImage {
@@ -123,7 +123,7 @@ fn empty_and_non_finite_centres() {
         assert!(
             matches!(
                 e,
-                RunnerError::NonFinite {
+                ImageError::NonFinite {
                     what: "centres",
                     row: 2
                 }

@@ -10,8 +10,11 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 
 use affcorr_geom::Mat3;
-use affcorr_ransac::EstimatorOptions;
-use affcorr_runner::{GrayImage, ImageSource, Matcher, Pipeline, RunnerError};
+use affcorr_image::ImageError;
+use affcorr_pipeline::{
+    EstimatorOptions, GrayImage, ImageSource, Matcher, Pipeline, PipelineError,
+};
+use affcorr_runner::RunnerError;
 
 fn graffiti() -> &'static (GrayImage, GrayImage, Mat3) {
     static DATA: OnceLock<(GrayImage, GrayImage, Mat3)> = OnceLock::new();
@@ -26,7 +29,7 @@ fn graffiti() -> &'static (GrayImage, GrayImage, Mat3) {
 }
 
 fn models() -> PathBuf {
-    common::root().join("python/affcorr/models")
+    common::models_dir()
 }
 
 fn pipeline(matcher: Matcher) -> Pipeline {
@@ -149,7 +152,10 @@ fn bad_models_and_images_are_named() {
         .models_dir("/nonexistent/models")
         .build()
         .unwrap_err();
-    assert!(matches!(e, RunnerError::ModelOpen { .. }), "{e}");
+    assert!(
+        matches!(e, PipelineError::Runner(RunnerError::ModelOpen { .. })),
+        "{e}"
+    );
     assert!(e.to_string().contains("xfeat_backbone.onnx"), "{e}");
     // The refinement model given as the backbone: its contract is named.
     let e = Pipeline::builder()
@@ -161,10 +167,10 @@ fn bad_models_and_images_are_named() {
     assert!(
         matches!(
             e,
-            RunnerError::Contract {
+            PipelineError::Runner(RunnerError::Contract {
                 contract: "features-backbone-v1",
                 ..
-            }
+            })
         ),
         "{msg}"
     );
@@ -189,7 +195,10 @@ fn bad_models_and_images_are_named() {
     let e = p
         .match_pair("/nonexistent.png", "/nonexistent2.png")
         .unwrap_err();
-    assert!(matches!(e, RunnerError::ImageOpen { .. }), "{e}");
+    assert!(
+        matches!(e, PipelineError::Image(ImageError::Open { .. })),
+        "{e}"
+    );
     let tiny = GrayImage::new(20, 20, vec![0.5; 400]).unwrap();
     let e = p.match_pair(&tiny, &tiny).unwrap_err();
     assert!(e.to_string().contains("too small"), "{e}");
@@ -223,7 +232,7 @@ fn match_pairs_in_parallel_equal_single_calls() {
         assert_eq!(got.certainty, want.certainty);
     }
     assert!(
-        matches!(&out[2], Err(RunnerError::ImageOpen { path, .. }) if *path == missing),
+        matches!(&out[2], Err(PipelineError::Image(ImageError::Open { path, .. })) if *path == missing),
         "{:?}",
         out[2].as_ref().err()
     );

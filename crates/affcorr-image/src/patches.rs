@@ -21,8 +21,8 @@
 
 use rayon::prelude::*;
 
-use crate::error::{Result, RunnerError};
-use crate::image::GrayImage;
+use crate::error::{ImageError, Result};
+use crate::gray::GrayImage;
 
 /// Side of a patch in pixels.
 pub const PATCH_SIZE: usize = 32;
@@ -44,7 +44,7 @@ impl Patches {
     /// Wraps `(N, 1, 32, 32)` data (`data.len()` a multiple of 1024, all finite).
     pub fn from_vec(data: Vec<f32>) -> Result<Self> {
         if !data.len().is_multiple_of(PATCH_LEN) {
-            return Err(RunnerError::invalid(
+            return Err(ImageError::invalid(
                 "patches",
                 format!(
                     "{} values is not a whole number of 1×32×32 patches",
@@ -53,7 +53,7 @@ impl Patches {
             ));
         }
         if let Some(i) = data.iter().position(|v| !v.is_finite()) {
-            return Err(RunnerError::NonFinite {
+            return Err(ImageError::NonFinite {
                 what: "patches",
                 row: i / PATCH_LEN,
             });
@@ -90,7 +90,7 @@ impl Patches {
 /// Cuts one patch per centre (x, y) from `image`; see the module docs for the sampling.
 ///
 /// ```
-/// use affcorr_runner::{GrayImage, extract_patches};
+/// use affcorr_image::{GrayImage, extract_patches};
 /// // I(x, y) = x: bilinear sampling reproduces it exactly away from the border.
 /// let (w, h) = (64, 48);
 /// let img = GrayImage::new(w, h, (0..w * h).map(|i| (i % w) as f32).collect()).unwrap();
@@ -103,7 +103,7 @@ pub fn extract_patches(image: &GrayImage, centres: &[[f64; 2]]) -> Result<Patche
 }
 
 /// [`extract_patches`] with the argument name used in errors.
-pub(crate) fn extract_named(
+pub fn extract_named(
     image: &GrayImage,
     centres: &[[f64; 2]],
     what: &'static str,
@@ -112,7 +112,7 @@ pub(crate) fn extract_named(
         .iter()
         .position(|c| !(c[0].is_finite() && c[1].is_finite()))
     {
-        return Err(RunnerError::NonFinite { what, row });
+        return Err(ImageError::NonFinite { what, row });
     }
     let mut data = vec![0.0f32; centres.len() * PATCH_LEN];
     let cut = |(out, c): (&mut [f32], &[f64; 2])| cut_patch(image, c[0], c[1], out);

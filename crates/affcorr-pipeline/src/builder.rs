@@ -1,0 +1,275 @@
+//! [`PipelineBuilder`]: which models, which options. Every default is [`crate::defaults`]'s.
+
+use std::path::PathBuf;
+use std::sync::OnceLock;
+
+use affcorr_image::AffineRefineOptions;
+use affcorr_runner::{
+    Matcher, MatcherFiles, ModelRole, PointMatcher, ShapeEstimator, ShapeModelOptions,
+};
+
+use crate::defaults;
+use crate::error::{PipelineError, Result};
+use crate::pipeline::Pipeline;
+
+/// The XFeat backbone's file name in a models directory ([`PipelineBuilder::models_dir`]).
+pub const BACKBONE_FILE: &str = "xfeat_backbone.onnx";
+/// The XFeat* refinement model's file name.
+pub const REFINE_FILE: &str = "xfeat_refine.onnx";
+/// LighterGlue's file name.
+pub const LIGHTERGLUE_FILE: &str = "xfeat_lighterglue.onnx";
+/// The shape network's file name.
+pub const SHAPE_FILE: &str = "shape.onnx";
+/// A dense matcher's file name in a models directory (none is shipped: DKM/RoMa exports are
+/// the user's, docs/matchers.md).
+pub const DENSE_FILE: &str = "dense.onnx";
+
+/// The file name of a matcher model in a models directory.
+pub fn model_file(role: ModelRole) -> &'static str {
+    match role {
+        ModelRole::Backbone => BACKBONE_FILE,
+        ModelRole::Refine => REFINE_FILE,
+        ModelRole::LighterGlue => LIGHTERGLUE_FILE,
+        ModelRole::Dense => DENSE_FILE,
+    }
+}
+
+/// Builds a [`Pipeline`]; see each method for its default.
+#[derive(Debug, Clone)]
+pub struct PipelineBuilder {
+    matcher: Matcher,
+    models_dir: Option<PathBuf>,
+    backbone: Option<PathBuf>,
+    refine: Option<PathBuf>,
+    lighterglue: Option<PathBuf>,
+    dense: Option<PathBuf>,
+    shape: Option<PathBuf>,
+    max_keypoints: Option<usize>,
+    max_matches: Option<usize>,
+    max_side: Option<usize>,
+    threads: Option<usize>,
+    shape_batch_size: usize,
+    affine_refinement: Option<AffineRefineOptions>,
+    seed: u64,
+}
+
+impl Default for PipelineBuilder {
+    fn default() -> Self {
+        Self {
+            matcher: defaults::MATCHER,
+            models_dir: None,
+            backbone: None,
+            refine: None,
+            lighterglue: None,
+            dense: None,
+            shape: None,
+            max_keypoints: None,
+            max_matches: None,
+            max_side: None,
+            threads: None,
+            shape_batch_size: affcorr_runner::shape::DEFAULT_BATCH_SIZE,
+            affine_refinement: defaults::REFINE_AFFINE.then(AffineRefineOptions::default),
+            seed: defaults::SEED,
+        }
+    }
+}
+
+impl PipelineBuilder {
+    /// The matcher (default [`defaults::MATCHER`]).
+    pub fn matcher(mut self, matcher: Matcher) -> Self {
+        self.matcher = matcher;
+        self
+    }
+
+    /// A directory holding `xfeat_backbone.onnx`, `xfeat_refine.onnx`, `xfeat_lighterglue.onnx`
+    /// and `shape.onnx` (in the repository: `python/affcorr/models`). Paths set one by one
+    /// take precedence. There is no default: the Rust API takes explicit paths.
+    pub fn models_dir(mut self, dir: impl Into<PathBuf>) -> Self {
+        self.models_dir = Some(dir.into());
+        self
+    }
+
+    /// The backbone model (`features-backbone-v1`).
+    pub fn backbone_model(mut self, path: impl Into<PathBuf>) -> Self {
+        self.backbone = Some(path.into());
+        self
+    }
+
+    /// The XFeat* refinement model (`features-refine-v1`; only [`Matcher::XFeatStar`]).
+    pub fn refine_model(mut self, path: impl Into<PathBuf>) -> Self {
+        self.refine = Some(path.into());
+        self
+    }
+
+    /// The LighterGlue model (`matcher-lighterglue-v1`; only [`Matcher::XFeatLighterGlue`]).
+    pub fn lighterglue_model(mut self, path: impl Into<PathBuf>) -> Self {
+        self.lighterglue = Some(path.into());
+        self
+    }
+
+    /// A dense matcher (`dense-warp-v1`, e.g. a DKM or RoMa export; docs/matchers.md), and
+    /// selects [`Matcher::Dense`]. No XFeat model is loaded then. Without this call a dense
+    /// pipeline looks for `dense.onnx` in [`Self::models_dir`].
+    pub fn dense_matcher(mut self, path: impl Into<PathBuf>) -> Self {
+        self.dense = Some(path.into());
+        self.matcher = Matcher::Dense;
+        self
+    }
+
+    /// Seed of a dense matcher's balanced sampling (default 0): a seed gives the same matches
+    /// on every run and thread count.
+    pub fn seed(mut self, seed: u64) -> Self {
+        self.seed = seed;
+        self
+    }
+
+    /// The shape network (`shape-v1`).
+    pub fn shape_model(mut self, path: impl Into<PathBuf>) -> Self {
+        self.shape = Some(path.into());
+        self
+    }
+
+    /// Keypoints per image (sparse) or semi-dense cells per image (XFeat*, split 20 % / 80 %
+    /// over its two scales). Default: [`defaults::MAX_KEYPOINTS`]. LighterGlue's cost grows
+    /// with the square of this.
+    pub fn max_keypoints(mut self, n: usize) -> Self {
+        self.max_keypoints = Some(n);
+        self
+    }
+
+    /// Keep at most this many matches, the most certain. Default: all. A dense matcher draws
+    /// this many (default [`defaults::DENSE_MATCHES`]).
+    pub fn max_matches(mut self, n: usize) -> Self {
+        self.max_matches = Some(n);
+        self
+    }
+
+    /// Downscale images whose longer side exceeds this many pixels before matching (the
+    /// resolution). Default: none (full resolution).
+    pub fn max_side(mut self, n: usize) -> Self {
+        self.max_side = Some(n);
+        self
+    }
+
+    /// Threads for ONNX Runtime (intra-op, per model) and for the Rust stages (a rayon pool of
+    /// this size). Default: every core.
+    pub fn threads(mut self, n: usize) -> Self {
+        self.threads = Some(n);
+        self
+    }
+
+    /// Patch pairs per shape-network run (default 512).
+    pub fn shape_batch_size(mut self, n: usize) -> Self {
+        self.shape_batch_size = n;
+        self
+    }
+
+    /// Refine the network's ACs against the working images by affine Lucas–Kanade
+    /// ([`affcorr_image::affine_refine`]; it moves x2 too with `move_points`); `None` turns it
+    /// off. Default ([`defaults::REFINE_AFFINE`]): on, with [`AffineRefineOptions::default`];
+    /// its effect on affine accuracy and relative pose is measured in
+    /// benches/results/eval/affine.md and benches/results/pose_refine.md.
+    pub fn affine_refinement(mut self, options: Option<AffineRefineOptions>) -> Self {
+        self.affine_refinement = options;
+        self
+    }
+
+    fn path(&self, explicit: &Option<PathBuf>, file: &str, what: &'static str) -> Result<PathBuf> {
+        explicit
+            .clone()
+            .or_else(|| self.models_dir.as_ref().map(|d| d.join(file)))
+            .ok_or_else(|| {
+                PipelineError::invalid(
+                    what,
+                    format!("no path given: call models_dir() or {what}() on the builder"),
+                )
+            })
+    }
+
+    /// The file of `role`, from its own setter or the models directory.
+    fn role_path(&self, role: ModelRole) -> Result<PathBuf> {
+        let (explicit, what) = match role {
+            ModelRole::Backbone => (&self.backbone, "backbone_model"),
+            ModelRole::Refine => (&self.refine, "refine_model"),
+            ModelRole::LighterGlue => (&self.lighterglue, "lighterglue_model"),
+            ModelRole::Dense => (&self.dense, "dense_matcher"),
+        };
+        self.path(explicit, model_file(role), what)
+    }
+
+    /// Loads and checks the models the matcher needs, and the shape network.
+    pub fn build(self) -> Result<Pipeline> {
+        let config = self.clone();
+        if self.max_keypoints == Some(0) {
+            return Err(PipelineError::invalid(
+                "max_keypoints",
+                "must be at least 1",
+            ));
+        }
+        if self.max_matches == Some(0) {
+            return Err(PipelineError::invalid("max_matches", "must be at least 1"));
+        }
+        if let Some(s) = self.max_side
+            && s < 32
+        {
+            return Err(PipelineError::invalid(
+                "max_side",
+                format!("{s} is below the matcher's minimum of 32 pixels"),
+            ));
+        }
+        let threads = affcorr_runner::resolve_threads(self.threads)?;
+        let mut files = MatcherFiles::default();
+        for &role in self.matcher.models() {
+            let path = Some(self.role_path(role)?);
+            match role {
+                ModelRole::Backbone => files.backbone = path,
+                ModelRole::Refine => files.refine = path,
+                ModelRole::LighterGlue => files.lighterglue = path,
+                ModelRole::Dense => files.dense = path,
+            }
+        }
+        // A dense matcher draws `max_matches` and keeps them all.
+        let (max_keypoints, max_matches) = match self.matcher {
+            Matcher::Dense => {
+                let n = self.max_matches.unwrap_or(defaults::DENSE_MATCHES);
+                (n, Some(n))
+            }
+            _ => (
+                self.max_keypoints.unwrap_or(defaults::MAX_KEYPOINTS),
+                self.max_matches,
+            ),
+        };
+        let matcher = PointMatcher::load(
+            self.matcher,
+            &files,
+            Some(max_keypoints),
+            self.seed,
+            threads,
+        )?;
+        let shape = ShapeEstimator::load(
+            self.path(&self.shape, SHAPE_FILE, "shape_model")?,
+            &ShapeModelOptions {
+                threads: Some(threads),
+                batch_size: self.shape_batch_size,
+            },
+        )?;
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .thread_name(|i| format!("affcorr-pipeline-{i}"))
+            .build()
+            .map_err(|e| {
+                PipelineError::invalid("threads", format!("cannot start the thread pool: {e}"))
+            })?;
+        Ok(Pipeline {
+            matcher,
+            shape,
+            affine_refinement: self.affine_refinement.clone(),
+            max_matches,
+            max_side: self.max_side,
+            threads,
+            pool,
+            config,
+            workers: OnceLock::new(),
+        })
+    }
+}

@@ -1,0 +1,90 @@
+//! The pipeline's one set of defaults, used by the Rust API, the Python API
+//! (`affcorr.PIPELINE_DEFAULTS`) and the CLI alike.
+//!
+//! Each value is chosen by a measurement; docs/pipeline.md gives the table and the command
+//! (`python -m affcorr_bench.defaults`) behind it. The low-level estimators
+//! (`affcorr_ransac::estimate_*` on the caller's own correspondences) keep their generic
+//! default threshold, [`affcorr_ransac::RansacOptions`]'s; the pipeline's thresholds suit the
+//! matchers it runs.
+
+use affcorr_ransac::EstimatorOptions;
+use affcorr_runner::Matcher;
+
+/// The default matcher: XFeat keypoints matched by LighterGlue (the most correct matches of
+/// the shipped matchers).
+pub const MATCHER: Matcher = Matcher::XFeatLighterGlue;
+
+/// Keypoints per image (semi-dense cells for XFeat*).
+pub const MAX_KEYPOINTS: usize = 4096;
+
+/// Matches a dense matcher draws when `max_matches` is not set. DKM draws 10 000; each costs a
+/// shape-network evaluation and a refinement, so fewer by default.
+pub const DENSE_MATCHES: usize = 2000;
+
+/// Whether the network's ACs are refined against the images by affine Lucas–Kanade.
+pub const REFINE_AFFINE: bool = true;
+
+/// The seed of a dense matcher's balanced sampling and of the robust estimators.
+pub const SEED: u64 = 0;
+
+/// Inlier threshold of [`crate::Pipeline::homography`]: transfer error, pixels.
+pub const HOMOGRAPHY_THRESHOLD: f64 = 2.0;
+
+/// Inlier threshold of [`crate::Pipeline::fundamental`]: Sampson distance, pixels.
+pub const FUNDAMENTAL_THRESHOLD: f64 = 2.0;
+
+/// Inlier threshold of [`crate::Pipeline::relative_pose`]: Sampson distance, pixels.
+pub const POSE_THRESHOLD: f64 = 2.0;
+
+/// What the pipeline estimates.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Geometry {
+    /// A homography p2 ~ H p1.
+    Homography,
+    /// A fundamental matrix p2ᵀ F p1 = 0.
+    Fundamental,
+    /// A calibrated relative pose X2 = R X1 + t.
+    RelativePose,
+}
+
+impl Geometry {
+    /// The pipeline's default inlier threshold for this geometry, pixels.
+    pub fn default_threshold(self) -> f64 {
+        match self {
+            Self::Homography => HOMOGRAPHY_THRESHOLD,
+            Self::Fundamental => FUNDAMENTAL_THRESHOLD,
+            Self::RelativePose => POSE_THRESHOLD,
+        }
+    }
+
+    /// The estimator options the pipeline uses by default: [`EstimatorOptions::default`] with
+    /// this geometry's threshold and [`SEED`].
+    pub fn default_options(self) -> EstimatorOptions {
+        let mut o = EstimatorOptions::default();
+        o.ransac.threshold = self.default_threshold();
+        o.ransac.seed = SEED;
+        o
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_options_carry_the_thresholds_and_nothing_else() {
+        for g in [
+            Geometry::Homography,
+            Geometry::Fundamental,
+            Geometry::RelativePose,
+        ] {
+            let mut o = g.default_options();
+            assert_eq!(o.ransac.threshold, g.default_threshold());
+            o.ransac.threshold = EstimatorOptions::default().ransac.threshold;
+            assert_eq!(
+                format!("{o:?}"),
+                format!("{:?}", EstimatorOptions::default())
+            );
+        }
+    }
+}

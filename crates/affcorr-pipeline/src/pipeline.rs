@@ -1,0 +1,344 @@
+//! [`Pipeline`]: the stages in order (see the crate docs), one pair or many.
+
+use std::sync::OnceLock;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+use affcorr_geom::Mat3;
+use affcorr_geom::camera::Intrinsics;
+use affcorr_image::{
+    AffineRefineOptions, GrayImage, ac_to_original, extract_named, limit_side, refine_affine,
+};
+use affcorr_ransac::problems::relpose::PoseModel;
+use affcorr_ransac::{
+    Correspondences, Estimate, EstimatorOptions, SamplerKind, estimate_fundamental,
+    estimate_homography, estimate_relative_pose,
+};
+use affcorr_runner::{Backbone, DenseMatcher, Matcher, PointMatcher, ShapeEstimator};
+
+use crate::builder::PipelineBuilder;
+use crate::error::{PipelineError, Result};
+use crate::result::{Estimated, Matches, Timings};
+use crate::source::ImageSource;
+
+/// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
+/// the pixels, ≈160 MB per megapixel (benches/results/bad_input_scale.md: 12 MP 2.0 GB, 48 MP
+/// 7.9 GB), so 64 MP is ≈10 GB; larger images would end in an out-of-memory abort instead of
+/// an error.
+pub const MAX_WORKING_PIXELS: usize = 64_000_000;
+
+fn check_working_size(img: &GrayImage, what: &'static str) -> Result<()> {
+    let (w, h) = (img.width(), img.height());
+    if w.saturating_mul(h) > MAX_WORKING_PIXELS {
+        return Err(PipelineError::invalid(
+            what,
+            format!(
+                "{w}×{h} pixels is over the matcher's limit of {} MP at the working resolution \
+                 (≈160 MB per megapixel): set max_side (e.g. 4096)",
+                MAX_WORKING_PIXELS / 1_000_000
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Matcher, shape network and estimators in one object; `Send` and `Sync` (inference runs
+/// under each model's mutex).
+#[derive(Debug)]
+pub struct Pipeline {
+    pub(crate) matcher: PointMatcher,
+    pub(crate) shape: ShapeEstimator,
+    pub(crate) affine_refinement: Option<AffineRefineOptions>,
+    pub(crate) max_matches: Option<usize>,
+    pub(crate) max_side: Option<usize>,
+    pub(crate) threads: usize,
+    pub(crate) pool: rayon::ThreadPool,
+    /// What the pipeline was built from (for the single-threaded workers of `match_pairs`).
+    pub(crate) config: PipelineBuilder,
+    /// `threads` single-threaded copies for `match_pairs`, built on its first call (or the
+    /// error that prevented it, as text: then batches run one pair after the other).
+    pub(crate) workers: OnceLock<std::result::Result<Vec<Pipeline>, String>>,
+}
+
+fn elapsed(t: &mut Instant) -> Duration {
+    let now = Instant::now();
+    let d = now - *t;
+    *t = now;
+    d
+}
+
+impl Pipeline {
+    /// A builder with the defaults.
+    pub fn builder() -> PipelineBuilder {
+        PipelineBuilder::default()
+    }
+
+    /// The matcher.
+    pub fn matcher(&self) -> Matcher {
+        self.matcher.kind()
+    }
+
+    /// Keypoints (or semi-dense cells) per image; for a dense matcher the matches it draws.
+    pub fn max_keypoints(&self) -> usize {
+        self.matcher.max_keypoints()
+    }
+
+    /// The cap on matches, if any.
+    pub fn max_matches(&self) -> Option<usize> {
+        self.max_matches
+    }
+
+    /// The working resolution's longest side, if capped.
+    pub fn max_side(&self) -> Option<usize> {
+        self.max_side
+    }
+
+    /// ONNX Runtime intra-op threads and rayon threads.
+    pub fn threads(&self) -> usize {
+        self.threads
+    }
+
+    /// The XFeat backbone (`None` for a dense matcher).
+    pub fn backbone(&self) -> Option<&Backbone> {
+        self.matcher.backbone()
+    }
+
+    /// The dense matcher (`Some` for [`Matcher::Dense`]).
+    pub fn dense_matcher(&self) -> Option<&DenseMatcher> {
+        self.matcher.dense_matcher()
+    }
+
+    /// The seed of the dense matcher's sampling.
+    pub fn seed(&self) -> u64 {
+        self.matcher.seed()
+    }
+
+    /// The affine refinement's options (`None` when it is off).
+    pub fn affine_refinement(&self) -> Option<&AffineRefineOptions> {
+        self.affine_refinement.as_ref()
+    }
+
+    /// The shape network.
+    pub fn shape_estimator(&self) -> &ShapeEstimator {
+        &self.shape
+    }
+
+    /// The ACs of an image pair (see the module docs).
+    pub fn match_pair<'a>(
+        &self,
+        image_a: impl Into<ImageSource<'a>>,
+        image_b: impl Into<ImageSource<'a>>,
+    ) -> Result<Matches> {
+        let (a, b) = (image_a.into(), image_b.into());
+        self.pool.install(|| self.match_inner(a, b))
+    }
+
+    /// [`Self::match_pair`] over many pairs; one result per pair, in order.
+    ///
+    /// With `threads` > 1 the pairs run in parallel, one per thread, each on a single-threaded
+    /// copy of the pipeline (ONNX Runtime and rayon with one thread; the copies are loaded on
+    /// the first call and kept). On 2 cores shared with other work this gave 12–20 % more pairs
+    /// per second than pairs one after the other with every thread per pair
+    /// (benches/results/pipeline_timing.md). The results equal [`Self::match_pair`]'s.
+    pub fn match_pairs<'a, A, B>(
+        &self,
+        pairs: impl IntoIterator<Item = (A, B)>,
+    ) -> Vec<Result<Matches>>
+    where
+        A: Into<ImageSource<'a>>,
+        B: Into<ImageSource<'a>>,
+    {
+        let pairs: Vec<(ImageSource<'a>, ImageSource<'a>)> = pairs
+            .into_iter()
+            .map(|(a, b)| (a.into(), b.into()))
+            .collect();
+        let workers = if self.threads > 1 && pairs.len() > 1 {
+            match self.workers.get_or_init(|| {
+                (0..self.threads)
+                    .map(|_| self.config.clone().threads(1).build())
+                    .collect::<Result<Vec<_>>>()
+                    .map_err(|e| e.to_string())
+            }) {
+                Ok(w) => w.as_slice(),
+                Err(_) => &[],
+            }
+        } else {
+            &[]
+        };
+        if workers.is_empty() {
+            return pairs
+                .into_iter()
+                .map(|(a, b)| self.match_pair(a, b))
+                .collect();
+        }
+        let next = AtomicUsize::new(0);
+        let mut results: Vec<Option<Result<Matches>>> = (0..pairs.len()).map(|_| None).collect();
+        std::thread::scope(|scope| {
+            let handles: Vec<_> = workers
+                .iter()
+                .take(pairs.len())
+                .map(|w| {
+                    let (next, pairs) = (&next, &pairs);
+                    scope.spawn(move || {
+                        let mut done = Vec::new();
+                        loop {
+                            let i = next.fetch_add(1, Ordering::Relaxed);
+                            let Some(&(a, b)) = pairs.get(i) else { break };
+                            done.push((i, w.match_pair(a, b)));
+                        }
+                        done
+                    })
+                })
+                .collect();
+            for h in handles {
+                for (i, r) in h.join().expect("a match_pairs worker panicked") {
+                    results[i] = Some(r);
+                }
+            }
+        });
+        results
+            .into_iter()
+            .map(|r| r.expect("every pair is matched"))
+            .collect()
+    }
+
+    /// The homography p2 ~ H p1 (original pixels) of an image pair: [`Self::match_pair`], then
+    /// [`estimate_homography`] on the ACs with `options`.
+    pub fn homography<'a>(
+        &self,
+        image_a: impl Into<ImageSource<'a>>,
+        image_b: impl Into<ImageSource<'a>>,
+        options: &EstimatorOptions,
+    ) -> Result<Estimated<Mat3>> {
+        let matches = self.match_pair(image_a, image_b)?;
+        self.estimate(matches, options, estimate_homography)
+    }
+
+    /// The fundamental matrix p2ᵀ F p1 = 0 (original pixels) of an image pair:
+    /// [`Self::match_pair`], then [`estimate_fundamental`] on the ACs with `options`.
+    pub fn fundamental<'a>(
+        &self,
+        image_a: impl Into<ImageSource<'a>>,
+        image_b: impl Into<ImageSource<'a>>,
+        options: &EstimatorOptions,
+    ) -> Result<Estimated<Mat3>> {
+        let matches = self.match_pair(image_a, image_b)?;
+        self.estimate(matches, options, estimate_fundamental)
+    }
+
+    /// The relative pose X2 = R X1 + t of two calibrated images: [`Self::match_pair`], then
+    /// [`estimate_relative_pose`] with the intrinsics `k1`, `k2` (of the original images).
+    pub fn relative_pose<'a>(
+        &self,
+        image_a: impl Into<ImageSource<'a>>,
+        image_b: impl Into<ImageSource<'a>>,
+        k1: &Intrinsics,
+        k2: &Intrinsics,
+        options: &EstimatorOptions,
+    ) -> Result<Estimated<PoseModel>> {
+        let matches = self.match_pair(image_a, image_b)?;
+        self.estimate(matches, options, |d, o| {
+            estimate_relative_pose(d, k1, k2, o)
+        })
+    }
+
+    /// Runs a robust estimator on `matches` (timed into `timings.ransac` and `.total`).
+    pub fn estimate<M>(
+        &self,
+        mut matches: Matches,
+        options: &EstimatorOptions,
+        estimator: impl Fn(&Correspondences, &EstimatorOptions) -> affcorr_ransac::Result<Estimate<M>>,
+    ) -> Result<Estimated<M>> {
+        let t = Instant::now();
+        let data = Correspondences::from_ac_rows(&matches.corrs)?;
+        let estimate = if options.sampler == SamplerKind::Prosac && options.quality.is_none() {
+            let mut o = options.clone();
+            o.quality = Some(matches.certainty.clone());
+            estimator(&data, &o)?
+        } else {
+            estimator(&data, options)?
+        };
+        let d = t.elapsed();
+        matches.timings.ransac += d;
+        matches.timings.total += d;
+        Ok(Estimated { matches, estimate })
+    }
+
+    fn match_inner(&self, a: ImageSource<'_>, b: ImageSource<'_>) -> Result<Matches> {
+        let start = Instant::now();
+        let mut t = start;
+        let mut timings = Timings::default();
+        let dense = self.matcher() == Matcher::Dense;
+        let (img_a, img_b, colour) = if dense {
+            let (ga, ca) = a
+                .load_with_colour()
+                .map_err(|e| PipelineError::image(e, "image_a"))?;
+            let (gb, cb) = b
+                .load_with_colour()
+                .map_err(|e| PipelineError::image(e, "image_b"))?;
+            (ga, gb, Some((ca, cb)))
+        } else {
+            let ga = a.load().map_err(|e| PipelineError::image(e, "image_a"))?;
+            let gb = b.load().map_err(|e| PipelineError::image(e, "image_b"))?;
+            (ga, gb, None)
+        };
+        let (work_a, sa) = limit_side(&img_a, self.max_side);
+        let (work_b, sb) = limit_side(&img_b, self.max_side);
+        if !dense {
+            check_working_size(&work_a, "image_a")?;
+            check_working_size(&work_b, "image_b")?;
+        }
+        timings.decode += elapsed(&mut t);
+
+        let raw = self.matcher.match_images(
+            &work_a,
+            &work_b,
+            colour.as_ref().map(|(ca, cb)| (ca, cb)),
+        )?;
+        timings.decode += raw.timings.preprocess;
+        timings.matcher += raw.timings.network;
+        timings.detection += raw.timings.detection;
+        timings.matching += raw.timings.matching;
+        let mut t = Instant::now();
+
+        // Most certain first (stable), then the cap.
+        let mut order: Vec<usize> = (0..raw.x1.len()).collect();
+        order.sort_by(|&i, &j| {
+            raw.certainty[j]
+                .partial_cmp(&raw.certainty[i])
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
+        if let Some(cap) = self.max_matches {
+            order.truncate(cap);
+        }
+        let x1: Vec<[f64; 2]> = order.iter().map(|&i| raw.x1[i].map(f64::from)).collect();
+        let x2: Vec<[f64; 2]> = order.iter().map(|&i| raw.x2[i].map(f64::from)).collect();
+        let certainty: Vec<f64> = order.iter().map(|&i| raw.certainty[i] as f64).collect();
+        timings.matching += elapsed(&mut t);
+
+        let patch_a = extract_named(&work_a, &x1, "x1")?;
+        let patch_b = extract_named(&work_b, &x2, "x2")?;
+        timings.patches += elapsed(&mut t);
+
+        let prediction = self.shape.model().predict(&patch_a, &patch_b)?;
+        let mut work: Vec<[f64; 8]> = prediction
+            .affine()?
+            .iter()
+            .zip(x1.iter().zip(&x2))
+            .map(|(m, (p, q))| [p[0], p[1], q[0], q[1], m[0], m[1], m[2], m[3]])
+            .collect();
+        timings.shape_net += elapsed(&mut t);
+        if let Some(options) = &self.affine_refinement {
+            work = refine_affine(&work_a, &work_b, &work, options)?.corrs;
+            timings.affine_refine += elapsed(&mut t);
+        }
+        let corrs = work.iter().map(|row| ac_to_original(row, sa, sb)).collect();
+        timings.total = start.elapsed();
+        Ok(Matches {
+            corrs,
+            certainty,
+            num_keypoints: raw.num_keypoints,
+            timings,
+        })
+    }
+}

@@ -1,0 +1,97 @@
+//! What the pipeline returns: the ACs of a pair with their timings, and a model estimated from
+//! them.
+
+use std::fmt;
+use std::time::Duration;
+
+use affcorr_ransac::Estimate;
+
+/// Wall time of each stage of one pair (see the module docs for what each covers).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Timings {
+    /// Decoding, downscaling to `max_side`, resizing to the network's multiples of 32.
+    pub decode: Duration,
+    /// The backbone network(s), or the dense matcher (with the resizing to its input).
+    pub matcher: Duration,
+    /// Keypoints and descriptors from the backbone's maps (0 for a dense matcher).
+    pub detection: Duration,
+    /// Mutual nearest neighbours, the refinement model or LighterGlue; a dense matcher's
+    /// balanced sampling.
+    pub matching: Duration,
+    /// Cutting the 32×32 patches.
+    pub patches: Duration,
+    /// The shape network and the synthesis of A.
+    pub shape_net: Duration,
+    /// The affine Lucas–Kanade refinement of the ACs (0 unless enabled,
+    /// [`crate::PipelineBuilder::affine_refinement`]).
+    pub affine_refine: Duration,
+    /// Robust estimation (0 for `match_pair`).
+    pub ransac: Duration,
+    /// The whole call.
+    pub total: Duration,
+}
+
+impl Timings {
+    /// (name, duration) of each stage in order, then `"total"`.
+    pub fn stages(&self) -> [(&'static str, Duration); 9] {
+        [
+            ("decode", self.decode),
+            ("matcher", self.matcher),
+            ("detection", self.detection),
+            ("matching", self.matching),
+            ("patches", self.patches),
+            ("shape_net", self.shape_net),
+            ("affine_refine", self.affine_refine),
+            ("ransac", self.ransac),
+            ("total", self.total),
+        ]
+    }
+}
+
+impl fmt::Display for Timings {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let parts: Vec<String> = self
+            .stages()
+            .iter()
+            .map(|(n, d)| format!("{n} {:.1} ms", d.as_secs_f64() * 1e3))
+            .collect();
+        f.write_str(&parts.join(", "))
+    }
+}
+
+/// The ACs of one image pair.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Matches {
+    /// `[x1, y1, x2, y2, a11, a12, a21, a22]` in the original images' pixels, A = ∂x2/∂x1,
+    /// sorted by decreasing certainty.
+    pub corrs: Vec<[f64; 8]>,
+    /// The matcher's certainty of each match (MNN: cosine similarity; XFeat*: refinement
+    /// confidence; LighterGlue: match score; dense: the certainty map), higher is better.
+    pub certainty: Vec<f64>,
+    /// Keypoints (or semi-dense cells) found in image A and in image B; for a dense matcher the
+    /// cells of its grid with certainty > 0 that warp into B (the same number twice).
+    pub num_keypoints: (usize, usize),
+    /// Wall time per stage.
+    pub timings: Timings,
+}
+
+impl Matches {
+    /// The number of ACs.
+    pub fn len(&self) -> usize {
+        self.corrs.len()
+    }
+
+    /// Whether there are none.
+    pub fn is_empty(&self) -> bool {
+        self.corrs.is_empty()
+    }
+}
+
+/// Matches and the model estimated from them.
+#[derive(Debug, Clone)]
+pub struct Estimated<M> {
+    /// The ACs the model was estimated from (their `timings.ransac` is set).
+    pub matches: Matches,
+    /// The robust estimate; `inliers` indexes `matches.corrs`.
+    pub estimate: Estimate<M>,
+}

@@ -1,0 +1,547 @@
+//! The matchers as one object: which ONNX models each needs, loading them, and running them on
+//! an image pair to matched points with certainties.
+//!
+//! | [`Matcher`] | models | certainty |
+//! |---|---|---|
+//! | `"xfeat"` | backbone; mutual nearest neighbours in Rust | cosine similarity |
+//! | `"xfeat-star"` | backbone at scales 0.6 and 1.3, MNN, refinement MLP | refinement confidence |
+//! | `"xfeat-lighterglue"` | backbone, LighterGlue | match score |
+//! | `"dense"` | a `dense-warp-v1` model (DKM, RoMa), DKM's balanced sampling | the model's |
+//!
+//! Points are in pixels of the images given (pixel centres at integers); the caller orders,
+//! caps and maps them (the pipeline crate).
+
+use std::fmt;
+use std::path::PathBuf;
+use std::str::FromStr;
+use std::time::{Duration, Instant};
+
+use affcorr_image::{GrayImage, RgbImage};
+
+use crate::dense::{DenseMatcher, SamplingOptions, balanced_sample};
+use crate::error::{Result, RunnerError};
+use crate::features::{
+    Backbone, DenseFeatures, SparseFeatures, dense_split, detect_and_compute, plane, preprocess,
+    star_scale_inputs,
+};
+use crate::matching::{
+    LighterGlue, RefineModel, mutual_nearest_neighbours, normalize_keypoints_lighterglue,
+    refine_matches,
+};
+
+/// Which matcher gives the points.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Matcher {
+    /// Sparse XFeat keypoints matched by mutual nearest neighbours (`"xfeat"`).
+    XFeatMnn,
+    /// Semi-dense XFeat*: reliable cells at two scales, mutual nearest neighbours, sub-pixel
+    /// refinement (`"xfeat-star"`).
+    XFeatStar,
+    /// Sparse XFeat keypoints matched by LighterGlue (`"xfeat-lighterglue"`).
+    XFeatLighterGlue,
+    /// A dense matcher (`dense-warp-v1`: DKM, RoMa) with DKM's balanced sampling (`"dense"`).
+    Dense,
+}
+
+/// A model a matcher runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ModelRole {
+    /// The XFeat backbone (`features-backbone-v1`).
+    Backbone,
+    /// The XFeat* refinement MLP (`features-refine-v1`).
+    Refine,
+    /// LighterGlue (`matcher-lighterglue-v1`).
+    LighterGlue,
+    /// A dense matcher (`dense-warp-v1`).
+    Dense,
+}
+
+impl ModelRole {
+    /// The name of the role in APIs (`"backbone"`, `"refine"`, `"lighterglue"`, `"dense"`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Backbone => "backbone",
+            Self::Refine => "refine",
+            Self::LighterGlue => "lighterglue",
+            Self::Dense => "dense",
+        }
+    }
+}
+
+impl Matcher {
+    /// Every matcher.
+    pub const ALL: [Matcher; 4] = [
+        Self::XFeatLighterGlue,
+        Self::XFeatMnn,
+        Self::XFeatStar,
+        Self::Dense,
+    ];
+
+    /// The name used by the Python API and the CLI.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::XFeatMnn => "xfeat",
+            Self::XFeatStar => "xfeat-star",
+            Self::XFeatLighterGlue => "xfeat-lighterglue",
+            Self::Dense => "dense",
+        }
+    }
+
+    /// The models this matcher runs.
+    pub fn models(self) -> &'static [ModelRole] {
+        match self {
+            Self::XFeatMnn => &[ModelRole::Backbone],
+            Self::XFeatStar => &[ModelRole::Backbone, ModelRole::Refine],
+            Self::XFeatLighterGlue => &[ModelRole::Backbone, ModelRole::LighterGlue],
+            Self::Dense => &[ModelRole::Dense],
+        }
+    }
+}
+
+impl fmt::Display for Matcher {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for Matcher {
+    type Err = RunnerError;
+
+    /// `"xfeat"` (also `"xfeat-mnn"`), `"xfeat-star"` (`"xfeat*"`), `"xfeat-lighterglue"`
+    /// (`"lighterglue"`), `"dense"` (`"dense-warp"`), case-insensitive.
+    fn from_str(s: &str) -> Result<Self> {
+        match s.to_ascii_lowercase().replace('_', "-").as_str() {
+            "xfeat" | "xfeat-mnn" => Ok(Self::XFeatMnn),
+            "xfeat-star" | "xfeat*" => Ok(Self::XFeatStar),
+            "xfeat-lighterglue" | "lighterglue" => Ok(Self::XFeatLighterGlue),
+            "dense" | "dense-warp" => Ok(Self::Dense),
+            _ => Err(RunnerError::invalid(
+                "matcher",
+                format!(
+                    "unknown matcher {s:?}; expected one of {}",
+                    Self::ALL.map(|m| format!("{:?}", m.name())).join(", ")
+                ),
+            )),
+        }
+    }
+}
+
+/// The model files of a matcher; each must be set for the roles [`Matcher::models`] lists.
+#[derive(Debug, Clone, Default)]
+pub struct MatcherFiles {
+    /// The XFeat backbone.
+    pub backbone: Option<PathBuf>,
+    /// The XFeat* refinement MLP.
+    pub refine: Option<PathBuf>,
+    /// LighterGlue.
+    pub lighterglue: Option<PathBuf>,
+    /// A dense matcher.
+    pub dense: Option<PathBuf>,
+}
+
+impl MatcherFiles {
+    /// The file of `role`.
+    pub fn get(&self, role: ModelRole) -> Option<&PathBuf> {
+        match role {
+            ModelRole::Backbone => self.backbone.as_ref(),
+            ModelRole::Refine => self.refine.as_ref(),
+            ModelRole::LighterGlue => self.lighterglue.as_ref(),
+            ModelRole::Dense => self.dense.as_ref(),
+        }
+    }
+}
+
+/// Wall time of a matcher's stages on one pair.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct MatcherTimings {
+    /// Resizing to the network's multiples of 32 (XFeat matchers).
+    pub preprocess: Duration,
+    /// The backbone network(s), or the dense matcher (with the resizing to its input).
+    pub network: Duration,
+    /// Keypoints and descriptors from the backbone's maps (0 for a dense matcher).
+    pub detection: Duration,
+    /// Mutual nearest neighbours, the refinement model or LighterGlue; a dense matcher's
+    /// balanced sampling.
+    pub matching: Duration,
+}
+
+/// Matched points of one pair, in the pixels of the images given, in the matcher's order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PointMatches {
+    /// Points in image A.
+    pub x1: Vec<[f32; 2]>,
+    /// Points in image B.
+    pub x2: Vec<[f32; 2]>,
+    /// The matcher's certainty of each match, higher is better.
+    pub certainty: Vec<f32>,
+    /// Keypoints (or semi-dense cells) found in image A and in image B; for a dense matcher the
+    /// cells of its grid with certainty > 0 that warp into B (the same number twice).
+    pub num_keypoints: (usize, usize),
+    /// Wall time per stage.
+    pub timings: MatcherTimings,
+}
+
+/// A loaded matcher; `Send` and `Sync` (inference runs under each model's mutex).
+#[derive(Debug)]
+pub struct PointMatcher {
+    kind: Matcher,
+    backbone: Option<Backbone>,
+    refine: Option<RefineModel>,
+    lighterglue: Option<LighterGlue>,
+    dense: Option<DenseMatcher>,
+    max_keypoints: usize,
+    seed: u64,
+}
+
+fn elapsed(t: &mut Instant) -> Duration {
+    let now = Instant::now();
+    let d = now - *t;
+    *t = now;
+    d
+}
+
+impl PointMatcher {
+    /// Loads and checks the models `kind` needs from `files`, with `threads` ONNX Runtime
+    /// intra-op threads each. `max_keypoints`: keypoints (semi-dense cells) per image, default
+    /// the backbone's `affcorr.detection.top_k`; for a dense matcher the matches it draws
+    /// (required). `seed`: a dense matcher's balanced sampling.
+    pub fn load(
+        kind: Matcher,
+        files: &MatcherFiles,
+        max_keypoints: Option<usize>,
+        seed: u64,
+        threads: usize,
+    ) -> Result<Self> {
+        if max_keypoints == Some(0) {
+            return Err(RunnerError::invalid("max_keypoints", "must be at least 1"));
+        }
+        let file = |role: ModelRole, what: &'static str| -> Result<&PathBuf> {
+            files
+                .get(role)
+                .ok_or_else(|| RunnerError::invalid(what, "no model file given"))
+        };
+        let needs = |role| kind.models().contains(&role);
+        let dense = if needs(ModelRole::Dense) {
+            Some(DenseMatcher::load(
+                file(ModelRole::Dense, "dense_matcher")?,
+                Some(threads),
+            )?)
+        } else {
+            None
+        };
+        let backbone = if needs(ModelRole::Backbone) {
+            Some(Backbone::load(
+                file(ModelRole::Backbone, "backbone_model")?,
+                Some(threads),
+            )?)
+        } else {
+            None
+        };
+        let dim = backbone.as_ref().map_or(0, |b| b.config().descriptor_dim);
+        let refine = if needs(ModelRole::Refine) {
+            let r = RefineModel::load(file(ModelRole::Refine, "refine_model")?, Some(threads))?;
+            check_dim("refine_model", r.source(), r.dim(), dim)?;
+            Some(r)
+        } else {
+            None
+        };
+        let lighterglue = if needs(ModelRole::LighterGlue) {
+            let g = LighterGlue::load(
+                file(ModelRole::LighterGlue, "lighterglue_model")?,
+                Some(threads),
+            )?;
+            check_dim("lighterglue_model", g.source(), g.dim(), dim)?;
+            Some(g)
+        } else {
+            None
+        };
+        let max_keypoints = match (&backbone, max_keypoints) {
+            (_, Some(n)) => n,
+            (Some(b), None) => b.config().top_k,
+            (None, None) => {
+                return Err(RunnerError::invalid(
+                    "max_keypoints",
+                    "a dense matcher needs the number of matches to draw",
+                ));
+            }
+        };
+        Ok(Self {
+            kind,
+            backbone,
+            refine,
+            lighterglue,
+            dense,
+            max_keypoints,
+            seed,
+        })
+    }
+
+    /// The matcher.
+    pub fn kind(&self) -> Matcher {
+        self.kind
+    }
+
+    /// Keypoints (or semi-dense cells) per image; for a dense matcher the matches it draws.
+    pub fn max_keypoints(&self) -> usize {
+        self.max_keypoints
+    }
+
+    /// The seed of a dense matcher's sampling.
+    pub fn seed(&self) -> u64 {
+        self.seed
+    }
+
+    /// The XFeat backbone (`None` for a dense matcher).
+    pub fn backbone(&self) -> Option<&Backbone> {
+        self.backbone.as_ref()
+    }
+
+    /// The dense matcher (`Some` for [`Matcher::Dense`]).
+    pub fn dense_matcher(&self) -> Option<&DenseMatcher> {
+        self.dense.as_ref()
+    }
+
+    /// Matches of a pair. `colour`: the same images in colour, which a dense matcher takes
+    /// (required for it; the others ignore it).
+    pub fn match_images(
+        &self,
+        a: &GrayImage,
+        b: &GrayImage,
+        colour: Option<(&RgbImage, &RgbImage)>,
+    ) -> Result<PointMatches> {
+        let mut timings = MatcherTimings::default();
+        let mut m = match (self.kind, colour) {
+            (Matcher::Dense, Some((ca, cb))) => self.match_dense(ca, cb, a, b, &mut timings)?,
+            (Matcher::Dense, None) => {
+                return Err(RunnerError::invalid(
+                    "colour",
+                    "a dense matcher needs the colour images",
+                ));
+            }
+            (Matcher::XFeatStar, _) => self.match_star(a, b, &mut timings)?,
+            _ => self.match_sparse(a, b, &mut timings)?,
+        };
+        m.timings = timings;
+        Ok(m)
+    }
+
+    /// The XFeat backbone; only called for the XFeat matchers, which load it.
+    fn xfeat(&self) -> &Backbone {
+        self.backbone
+            .as_ref()
+            .expect("XFeat matchers load the backbone")
+    }
+
+    /// A dense matcher's balanced sample, in pixels of `a`, `b` (the warp's coordinates are
+    /// resolution-free, so the colour images need not have their size).
+    fn match_dense(
+        &self,
+        colour_a: &RgbImage,
+        colour_b: &RgbImage,
+        a: &GrayImage,
+        b: &GrayImage,
+        timings: &mut MatcherTimings,
+    ) -> Result<PointMatches> {
+        let dense = self
+            .dense
+            .as_ref()
+            .expect("dense matchers load the dense model");
+        let mut t = Instant::now();
+        let warp = dense.run(colour_a, colour_b)?;
+        timings.network += elapsed(&mut t);
+        let sample = balanced_sample(
+            &warp,
+            &SamplingOptions {
+                num: self.max_keypoints,
+                seed: self.seed,
+                ..Default::default()
+            },
+        )?;
+        let (x1, x2) = warp.to_pixels(
+            &sample.index,
+            (a.width(), a.height()),
+            (b.width(), b.height()),
+        );
+        let to_f32 = |p: Vec<[f64; 2]>| -> Vec<[f32; 2]> {
+            p.into_iter().map(|[x, y]| [x as f32, y as f32]).collect()
+        };
+        let m = PointMatches {
+            x1: to_f32(x1),
+            x2: to_f32(x2),
+            certainty: sample.certainty,
+            num_keypoints: (sample.candidates, sample.candidates),
+            timings: MatcherTimings::default(),
+        };
+        timings.matching += elapsed(&mut t);
+        Ok(m)
+    }
+
+    fn sparse_features(
+        &self,
+        img: &GrayImage,
+        timings: &mut MatcherTimings,
+    ) -> Result<SparseFeatures> {
+        let mut t = Instant::now();
+        let cfg = self.xfeat().config();
+        let (data, h, w) = plane(img);
+        let input = preprocess(data, h, w, cfg.input_multiple)?;
+        timings.preprocess += elapsed(&mut t);
+        let maps = self
+            .xfeat()
+            .run(&input.data, input.height, input.width, true)?;
+        timings.network += elapsed(&mut t);
+        let f = detect_and_compute(
+            &maps,
+            self.max_keypoints,
+            cfg.threshold,
+            cfg.nms_size,
+            (input.rh, input.rw),
+            (w, h),
+        );
+        timings.detection += elapsed(&mut t);
+        Ok(f)
+    }
+
+    fn match_sparse(
+        &self,
+        a: &GrayImage,
+        b: &GrayImage,
+        timings: &mut MatcherTimings,
+    ) -> Result<PointMatches> {
+        let fa = self.sparse_features(a, timings)?;
+        let fb = self.sparse_features(b, timings)?;
+        let mut t = Instant::now();
+        let num_keypoints = (fa.len(), fb.len());
+        let m = match &self.lighterglue {
+            None => {
+                let m = mutual_nearest_neighbours(&fa.descriptors, &fb.descriptors, fa.dim);
+                PointMatches {
+                    x1: m.idx1.iter().map(|&i| fa.keypoints[i]).collect(),
+                    x2: m.idx2.iter().map(|&j| fb.keypoints[j]).collect(),
+                    certainty: m.similarity,
+                    num_keypoints,
+                    timings: MatcherTimings::default(),
+                }
+            }
+            Some(glue) => {
+                let k0 = normalize_keypoints_lighterglue(&fa.keypoints, fa.image_size);
+                let k1 = normalize_keypoints_lighterglue(&fb.keypoints, fb.image_size);
+                let m = glue.run(&k0, &fa.descriptors, &k1, &fb.descriptors, glue.min_conf())?;
+                PointMatches {
+                    x1: m.idx0.iter().map(|&i| fa.keypoints[i]).collect(),
+                    x2: m.idx1.iter().map(|&j| fb.keypoints[j]).collect(),
+                    certainty: m.score,
+                    num_keypoints,
+                    timings: MatcherTimings::default(),
+                }
+            }
+        };
+        timings.matching += elapsed(&mut t);
+        Ok(m)
+    }
+
+    fn dense_features(
+        &self,
+        img: &GrayImage,
+        timings: &mut MatcherTimings,
+    ) -> Result<DenseFeatures> {
+        let mut t = Instant::now();
+        let cfg = self.xfeat().config();
+        let (data, h, w) = plane(img);
+        let inputs = star_scale_inputs(data, h, w, &cfg.semidense_scales, cfg.input_multiple)?;
+        let split = dense_split(self.max_keypoints, &cfg.semidense_split);
+        timings.preprocess += elapsed(&mut t);
+        let mut f = DenseFeatures::default();
+        for ((s, input), k) in inputs.iter().zip(split) {
+            let maps = self
+                .xfeat()
+                .run(&input.data, input.height, input.width, false)?;
+            timings.network += elapsed(&mut t);
+            f.push_scale(&maps, k, (input.rh, input.rw), *s);
+            timings.detection += elapsed(&mut t);
+        }
+        Ok(f)
+    }
+
+    fn match_star(
+        &self,
+        a: &GrayImage,
+        b: &GrayImage,
+        timings: &mut MatcherTimings,
+    ) -> Result<PointMatches> {
+        let refine = self
+            .refine
+            .as_ref()
+            .expect("XFeat* matchers load the refinement model");
+        let fa = self.dense_features(a, timings)?;
+        let fb = self.dense_features(b, timings)?;
+        let mut t = Instant::now();
+        let d = fa.dim;
+        let m = mutual_nearest_neighbours(&fa.descriptors, &fb.descriptors, d);
+        let mut pair = vec![0f32; m.len() * 2 * d];
+        for (row, (&i, &j)) in pair.chunks_mut(2 * d).zip(m.idx1.iter().zip(&m.idx2)) {
+            row[..d].copy_from_slice(&fa.descriptors[i * d..(i + 1) * d]);
+            row[d..].copy_from_slice(&fb.descriptors[j * d..(j + 1) * d]);
+        }
+        let r = refine.run(&pair)?;
+        let mut x1: Vec<[f32; 2]> = m.idx1.iter().map(|&i| fa.keypoints[i]).collect();
+        let inv: Vec<f32> = m.idx1.iter().map(|&i| fa.inv_scale[i]).collect();
+        let keep = refine_matches(&mut x1, &inv, &r, refine.min_confidence());
+        let out = PointMatches {
+            x1: keep.iter().map(|&k| x1[k]).collect(),
+            x2: keep.iter().map(|&k| fb.keypoints[m.idx2[k]]).collect(),
+            certainty: keep.iter().map(|&k| r.confidence[k]).collect(),
+            num_keypoints: (fa.len(), fb.len()),
+            timings: MatcherTimings::default(),
+        };
+        timings.matching += elapsed(&mut t);
+        Ok(out)
+    }
+}
+
+fn check_dim(what: &'static str, source: &str, got: usize, want: usize) -> Result<()> {
+    if got == want {
+        Ok(())
+    } else {
+        Err(RunnerError::invalid(
+            what,
+            format!("{source} takes {got}-dimensional descriptors, the backbone gives {want}"),
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_and_unknown_names_list_the_choices() {
+        for m in Matcher::ALL {
+            assert_eq!(m.name().parse::<Matcher>().unwrap(), m);
+            assert_eq!(m.to_string(), m.name());
+        }
+        assert_eq!("XFeat*".parse::<Matcher>().unwrap(), Matcher::XFeatStar);
+        assert_eq!(
+            "xfeat_lighterglue".parse::<Matcher>().unwrap(),
+            Matcher::XFeatLighterGlue
+        );
+        let e = "sift".parse::<Matcher>().unwrap_err().to_string();
+        assert!(e.starts_with("matcher: unknown matcher \"sift\""), "{e}");
+        for m in Matcher::ALL {
+            assert!(e.contains(&format!("{:?}", m.name())), "{e}");
+        }
+    }
+
+    #[test]
+    fn every_matcher_needs_its_models() {
+        assert_eq!(Matcher::Dense.models(), &[ModelRole::Dense]);
+        for m in Matcher::ALL.into_iter().filter(|&m| m != Matcher::Dense) {
+            assert_eq!(m.models()[0], ModelRole::Backbone);
+        }
+        let files = MatcherFiles::default();
+        for m in Matcher::ALL {
+            let e = PointMatcher::load(m, &files, Some(10), 0, 1).unwrap_err();
+            assert!(e.to_string().contains("no model file given"), "{e}");
+        }
+    }
+}
