@@ -609,7 +609,7 @@ fn refine_one(
 
 /// The image convolved with a Gaussian of σ pixels (kernel radius ⌈3σ⌉, border replicated),
 /// rows then columns; σ = 0 copies it.
-fn gaussian_blur(image: &GrayImage, sigma: f64) -> Vec<f32> {
+pub(crate) fn gaussian_blur(image: &GrayImage, sigma: f64) -> Vec<f32> {
     let (w, h) = (image.width(), image.height());
     if sigma <= 0.0 {
         return image.data().to_vec();

@@ -9,6 +9,7 @@
 //!   pixels.
 //! - [`patches`]: bilinear 32×32 patches at sub-pixel centres, `(N, 1, 32, 32)`.
 //! - [`affine_refine`]: affine Lucas–Kanade refinement of ACs, coarse to fine.
+//! - [`warp`]: synthetic views (rotation, zoom, tilt) and the map of their ACs back.
 //! - [`error`]: [`ImageError`], which names what went wrong.
 //!
 //! Conventions are docs/design.md §2's: pixels (x, y) with x right and y down, pixel centres at
@@ -28,6 +29,7 @@ pub mod gray;
 pub mod patches;
 pub mod resize;
 pub mod rgb;
+pub mod warp;
 
 pub use affine_refine::{AffineRefineOptions, AffineRefinement, refine_affine};
 pub use error::{ImageError, Result};
@@ -35,3 +37,4 @@ pub use gray::{GrayImage, LUMA_WEIGHTS, PixelData};
 pub use patches::{PATCH_LEN, PATCH_SIZE, Patches, extract_named, extract_patches};
 pub use resize::{ac_to_original, limit_side};
 pub use rgb::RgbImage;
+pub use warp::{AffineWarp, ac_from_views, warp_image};
