@@ -21,7 +21,7 @@
 use crate::batch;
 use crate::camera::check_len;
 use crate::error::{GeomError, Result};
-use crate::types::{AcRow, Mat2, mat2_from_row, mat2_to_row};
+use crate::types::{AcRow, Mat2, mat2_from_row, mat2_to_row, max_abs, power_of_two_normalizer};
 
 /// Orientation θ (radians, in (−π, π]), scale s and residual shape A″ of one affine map.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -49,7 +49,14 @@ pub fn residual_shape_matrix(x: &[f64; 3]) -> Option<Mat2> {
     if !(d0 > 0.0 && d2 > 0.0 && x[1].is_finite() && d0.is_finite() && d2.is_finite()) {
         return None;
     }
-    let k = 1.0 / (d0 * d2).sqrt();
+    // det B = d0·d2 may overflow (or underflow) for finite A″: then √d0·√d2 instead, which
+    // cannot. The plain product otherwise, so ordinary inputs keep their bits.
+    let det = d0 * d2;
+    let k = if det.is_normal() {
+        1.0 / det.sqrt()
+    } else {
+        1.0 / (d0.sqrt() * d2.sqrt())
+    };
     Some(Mat2::new(d0 * k, 0.0, x[1] * k, d2 * k))
 }
 
@@ -94,7 +101,15 @@ pub fn synthesize(shape: &AffineShape, index: usize) -> Result<Mat2> {
         index,
         value: (1.0 + shape.residual_shape[0]).min(1.0 + shape.residual_shape[2]),
     })?;
-    Ok(rotation(shape.orientation) * a_prime * shape.scale)
+    let a = rotation(shape.orientation) * a_prime * shape.scale;
+    if a.iter().any(|v| !v.is_finite()) {
+        return Err(GeomError::Overflow {
+            what: "A",
+            index,
+            reason: "scale · A′(residual_shape) is beyond 1.8e308",
+        });
+    }
+    Ok(a)
 }
 
 /// The unique (θ, s, canonical A″) with A = s · R(θ) · A′(A″); errors when det A ≤ 0.
@@ -111,16 +126,21 @@ pub fn decompose(a: &Mat2, index: usize) -> Result<AffineShape> {
     if a.iter().any(|v| !v.is_finite()) {
         return Err(GeomError::NonFinite { what: "A", index });
     }
-    let det = a.determinant();
-    if det <= 0.0 {
+    // A = Â / r with r a power of two: det Â cannot overflow or underflow, and for ordinary A
+    // every step below gives the same bits as on A itself (the scale is exact).
+    let r = power_of_two_normalizer(max_abs(a.iter()));
+    let a_hat = a * r;
+    let det_hat = a_hat.determinant();
+    if det_hat <= 0.0 {
         return Err(GeomError::NonPositiveDeterminant {
             what: "A",
             index,
-            det,
+            det: det_hat / (r * r),
         });
     }
-    let scale = det.sqrt();
-    let m = a / scale;
+    let scale_hat = det_hat.sqrt();
+    let scale = scale_hat / r;
+    let m = a_hat / scale_hat;
     let orientation = (-m[(0, 1)]).atan2(m[(1, 1)]);
     let inv_a = (m[(0, 1)] * m[(0, 1)] + m[(1, 1)] * m[(1, 1)]).sqrt();
     // a = 1/‖m_{:,2}‖ exactly; A′'s (0,0) entry recomputed from M would carry rounding.

@@ -7,7 +7,7 @@
 
 use crate::camera::Intrinsics;
 use crate::error::{GeomError, Result};
-use crate::types::{Mat3, Vec2, Vec3};
+use crate::types::{Mat3, Vec2, Vec3, max_abs, power_of_two_normalizer};
 
 /// A relative pose: X2 = R X1 + t.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -59,6 +59,9 @@ pub fn decompose_essential(e: &Mat3) -> Result<[Pose; 4]> {
             index: 0,
         });
     }
+    // R and t do not depend on E's scale: factor E · r (r a power of two, exact) so that the
+    // SVD neither overflows for huge E nor loses a tiny one to underflow.
+    let e = e * power_of_two_normalizer(max_abs(e.iter()));
     let svd = e.svd(true, true);
     let (mut u, mut v_t) = (svd.u.unwrap(), svd.v_t.unwrap());
     // nalgebra's SVD does not sort singular values: bring the smallest to the last column.

@@ -66,6 +66,16 @@ pub enum GeomError {
         /// Why it was rejected.
         reason: &'static str,
     },
+    /// A result that does not fit in f64, from finite inputs (e.g. `s · A′` past 1.8e308).
+    #[error("{what}[{index}]: the result overflows f64 ({reason})")]
+    Overflow {
+        /// Argument name.
+        what: &'static str,
+        /// Row index.
+        index: usize,
+        /// What overflowed.
+        reason: &'static str,
+    },
 }
 
 /// Result alias for this crate.

@@ -51,12 +51,19 @@
 //!
 //! The distances are invariant to the scale (and sign) of F, so the gradient w.r.t. F is
 //! orthogonal to F (Euler's theorem for a function homogeneous of degree 0).
+//!
+//! **Extreme scales of F.** The batched forms run the kernels on F · r, r the power of two that
+//! brings F's largest entry into [1, 2), and scale the F-gradient back by r: exact, so the bits
+//! are those of F for ordinary F, and the invariance holds for any finite F (F · 1e±300 gives
+//! F's distances instead of NaN or 0; `tests/extreme_magnitudes.rs`). The scalar forms, for hot
+//! loops, take F as it is (the estimators' models are normalised already).
 
 use crate::batch;
 use crate::camera::check_len;
 use crate::error::{GeomError, Result};
 use crate::types::{
     AcRow, AffineCorrespondence, CorrespondenceRow, Mat3, PointCorrespondence, mat3_from_row,
+    max_abs, power_of_two_normalizer,
 };
 
 /// The fundamental matrices of a batch: one for every row, or one per row (row-major).
@@ -402,17 +409,29 @@ fn check_corrs(values: &[f64], index: usize) -> Result<()> {
     }
 }
 
-/// Runs `kernel(F_i, i)` for every row of `out`, checking the lengths and F's entries.
+/// F · r with r the power of two that brings its largest entry into [1, 2), and r. The
+/// distances are invariant to F's scale and their F-gradient scales as 1/scale, so a kernel run
+/// on F · r gives the distance of F and, multiplied by r, its F-gradient: bit for bit the same
+/// as on F when F's products neither overflow nor underflow, and finite when they would
+/// (F · 1e155, F · 1e-160; docs/reliability.md).
+fn normalized(f: &Mat3) -> (Mat3, f64) {
+    let r = power_of_two_normalizer(max_abs(f.iter()));
+    (f * r, r)
+}
+
+/// Runs `kernel(F_i · r_i, r_i, i)` for every row of `out` (see [`normalized`]), checking the
+/// lengths and F's entries.
 fn run<T, K>(f: Fundamentals<'_>, n: usize, out: &mut [T], kernel: K) -> Result<()>
 where
     T: Send,
-    K: Fn(&Mat3, usize) -> Result<T> + Sync,
+    K: Fn(&Mat3, f64, usize) -> Result<T> + Sync,
 {
     check_len("out", n, out.len())?;
     match f {
         Fundamentals::Shared(f) => {
             check_f(f)?;
-            batch::try_fill(out, |i| kernel(f, i))
+            let (f, r) = normalized(f);
+            batch::try_fill(out, |i| kernel(&f, r, i))
         }
         Fundamentals::PerRow(fs) => {
             check_len("F", n, fs.len())?;
@@ -423,10 +442,16 @@ where
                         index: i,
                     });
                 }
-                kernel(&mat3_from_row(&fs[i]), i)
+                let (f, r) = normalized(&mat3_from_row(&fs[i]));
+                kernel(&f, r, i)
             })
         }
     }
+}
+
+/// `d_f · r`: the F-gradient of F from that of F · r.
+fn scaled<const K: usize>(d_f: [f64; K], r: f64) -> [f64; K] {
+    d_f.map(|v| v * r)
 }
 
 fn point_of<R: CorrespondenceRow>(corrs: &[R], i: usize) -> Result<PointCorrespondence> {
@@ -448,7 +473,7 @@ pub fn sampson_point_batch<'a, R: CorrespondenceRow>(
     corrs: &[R],
     out: &mut [f64],
 ) -> Result<()> {
-    run(f.into(), corrs.len(), out, |f, i| {
+    run(f.into(), corrs.len(), out, |f, _, i| {
         Ok(sampson_point(f, &point_of(corrs, i)?))
     })
 }
@@ -460,7 +485,7 @@ pub fn sampson_affine_batch<'a>(
     corrs: &[AcRow],
     out: &mut [[f64; 2]],
 ) -> Result<()> {
-    run(f.into(), corrs.len(), out, |f, i| {
+    run(f.into(), corrs.len(), out, |f, _, i| {
         Ok(sampson_affine(f, &ac_of(corrs, i)?))
     })
 }
@@ -471,8 +496,10 @@ pub fn sampson_point_grad_batch<'a, R: CorrespondenceRow>(
     corrs: &[R],
     out: &mut [PointSampsonGrad],
 ) -> Result<()> {
-    run(f.into(), corrs.len(), out, |f, i| {
-        Ok(sampson_point_grad(f, &point_of(corrs, i)?))
+    run(f.into(), corrs.len(), out, |f, r, i| {
+        let mut g = sampson_point_grad(f, &point_of(corrs, i)?);
+        g.d_f = scaled(g.d_f, r);
+        Ok(g)
     })
 }
 
@@ -482,12 +509,16 @@ pub fn sampson_affine_grad_batch<'a>(
     corrs: &[AcRow],
     out: &mut [[AffineSampsonGrad; 2]],
 ) -> Result<()> {
-    run(f.into(), corrs.len(), out, |f, i| {
-        Ok(sampson_affine_grad(f, &ac_of(corrs, i)?))
+    run(f.into(), corrs.len(), out, |f, r, i| {
+        let mut g = sampson_affine_grad(f, &ac_of(corrs, i)?);
+        for g in &mut g {
+            g.d_f = scaled(g.d_f, r);
+        }
+        Ok(g)
     })
 }
 
-/// Runs `kernel(F_i, i)` into three outputs, checking the lengths and F's entries.
+/// Runs `kernel(F_i · r_i, r_i, i)` into three outputs (as [`run`]), checking the lengths and F's entries.
 fn run3<A, B, C, K>(
     f: Fundamentals<'_>,
     n: usize,
@@ -498,7 +529,7 @@ where
     A: Send,
     B: Send,
     C: Send,
-    K: Fn(&Mat3, usize) -> Result<(A, B, C)> + Sync,
+    K: Fn(&Mat3, f64, usize) -> Result<(A, B, C)> + Sync,
 {
     let (a, b, c) = out;
     check_len("value", n, a.len())?;
@@ -507,7 +538,8 @@ where
     match f {
         Fundamentals::Shared(f) => {
             check_f(f)?;
-            batch::try_fill3(a, b, c, |i| kernel(f, i))
+            let (f, r) = normalized(f);
+            batch::try_fill3(a, b, c, |i| kernel(&f, r, i))
         }
         Fundamentals::PerRow(fs) => {
             check_len("F", n, fs.len())?;
@@ -518,7 +550,8 @@ where
                         index: i,
                     });
                 }
-                kernel(&mat3_from_row(&fs[i]), i)
+                let (f, r) = normalized(&mat3_from_row(&fs[i]));
+                kernel(&f, r, i)
             })
         }
     }
@@ -537,11 +570,11 @@ pub fn sampson_point_grad_columns<'a, R: CorrespondenceRow, const W: usize>(
     d_f: &mut [[f64; 9]],
 ) -> Result<()> {
     const { assert!(W >= 4, "gradient rows hold at least x1, y1, x2, y2") };
-    run3(f.into(), corrs.len(), (value, d_corrs, d_f), |f, i| {
+    run3(f.into(), corrs.len(), (value, d_corrs, d_f), |f, r, i| {
         let g = sampson_point_grad(f, &point_of(corrs, i)?);
         let mut row = [0.0; W];
         row[..4].copy_from_slice(&g.d_row());
-        Ok((g.value, row, g.d_f))
+        Ok((g.value, row, scaled(g.d_f, r)))
     })
 }
 
@@ -555,12 +588,12 @@ pub fn sampson_affine_grad_columns<'a>(
     d_corrs: &mut [[[f64; 8]; 2]],
     d_f: &mut [[[f64; 9]; 2]],
 ) -> Result<()> {
-    run3(f.into(), corrs.len(), (value, d_corrs, d_f), |f, i| {
+    run3(f.into(), corrs.len(), (value, d_corrs, d_f), |f, r, i| {
         let [g0, g1] = sampson_affine_grad(f, &ac_of(corrs, i)?);
         Ok((
             [g0.value, g1.value],
             [g0.d_row(), g1.d_row()],
-            [g0.d_f, g1.d_f],
+            [scaled(g0.d_f, r), scaled(g1.d_f, r)],
         ))
     })
 }

@@ -139,6 +139,32 @@ pub fn mat3_to_row(m: &Mat3) -> [f64; 9] {
     out
 }
 
+/// The power of two r with `max_abs · r` in [1, 2) (1 for 0 or non-finite `max_abs`).
+///
+/// Multiplying by a power of two is exact, so a kernel that is homogeneous in a matrix (the
+/// Sampson distances in F, the decomposition of A in A, the factorisation of E) gives the same
+/// bits on `M · r` as on `M` whenever `M`'s products neither overflow nor underflow, and finite
+/// answers when they would: this is how those kernels keep their scale invariance for any
+/// finite input (docs/reliability.md, "Extreme magnitudes").
+#[inline]
+pub fn power_of_two_normalizer(max_abs: f64) -> f64 {
+    if !(max_abs > 0.0 && max_abs.is_finite()) {
+        return 1.0;
+    }
+    // The binary exponent; subnormals (exponent field 0) count as 2^-1023, which leaves their
+    // scaled value in [2^-52, 1): still far from underflow.
+    let e = ((max_abs.to_bits() >> 52) & 0x7ff) as i32 - 1023;
+    // 2^-e in two exact factors, so that 2^1023 (e = -1023) is reachable.
+    let half = -e / 2;
+    2f64.powi(half) * 2f64.powi(-e - half)
+}
+
+/// The largest absolute entry.
+#[inline]
+pub fn max_abs<'a>(values: impl IntoIterator<Item = &'a f64>) -> f64 {
+    values.into_iter().fold(0.0, |m, v| m.max(v.abs()))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -157,5 +183,28 @@ mod tests {
         let m = mat3_from_row(&[1., 2., 3., 4., 5., 6., 7., 8., 9.]);
         assert_eq!(m[(1, 2)], 6.0);
         assert_eq!(mat3_to_row(&m), [1., 2., 3., 4., 5., 6., 7., 8., 9.]);
+    }
+
+    #[test]
+    fn the_normalizer_is_a_power_of_two_bringing_the_maximum_into_one_to_two() {
+        for m in [
+            1.0,
+            1.5,
+            3.0,
+            1e-300,
+            1e300,
+            f64::MAX,
+            0.75,
+            f64::MIN_POSITIVE,
+        ] {
+            let r = power_of_two_normalizer(m);
+            assert!((1.0..2.0).contains(&(m * r)), "{m:e}: {:e}", m * r);
+            assert_eq!(r.log2().fract(), 0.0, "{m:e}: r = {r:e} is a power of two");
+        }
+        // Subnormals land in [2^-52, 1), far from underflow.
+        let tiny = 5e-324 * power_of_two_normalizer(5e-324);
+        assert!(tiny >= 2f64.powi(-52) && tiny < 1.0);
+        assert_eq!(power_of_two_normalizer(0.0), 1.0);
+        assert_eq!(power_of_two_normalizer(f64::NAN), 1.0);
     }
 }
