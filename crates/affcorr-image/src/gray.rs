@@ -205,12 +205,64 @@ fn decode(bytes: &[u8], source_name: &str) -> Result<GrayImage> {
 /// [`GrayImage::open`] (for the dense matcher, which wants the colour too); also returns the
 /// name errors use for it.
 pub fn open_dynamic(path: &Path) -> Result<(DynamicImage, String)> {
-    let bytes = std::fs::read(path).map_err(|e| ImageError::Open {
+    let name = format!("`{}`", path.display());
+    let bytes = read_image_file(path, &name)?;
+    Ok((decode_dynamic(&bytes, &name)?, name))
+}
+
+/// The largest image file read: 256 MiB. The decoder's own limit (512 MiB of pixels) bounds
+/// what a small file may declare; this bounds what is read before decoding, so a huge file, or
+/// a device such as `/dev/zero`, is refused instead of filling memory.
+pub const MAX_IMAGE_FILE_BYTES: u64 = 256 << 20;
+
+/// PNG's signature and JPEG's start-of-image marker: what a file must begin with.
+const SIGNATURES: [&[u8]; 2] = [b"\x89PNG\r\n\x1a\n", &[0xFF, 0xD8, 0xFF]];
+
+/// Reads an image file: its first bytes must be a PNG or JPEG signature (checked before the
+/// rest is read) and it must not exceed [`MAX_IMAGE_FILE_BYTES`].
+fn read_image_file(path: &Path, name: &str) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let open_error = |e: std::io::Error| ImageError::Open {
         path: path.to_path_buf(),
         reason: e.to_string(),
-    })?;
-    let name = format!("`{}`", path.display());
-    Ok((decode_dynamic(&bytes, &name)?, name))
+    };
+    let mut file = std::fs::File::open(path).map_err(open_error)?;
+    let mut head = [0u8; 8];
+    let mut got = 0;
+    while got < head.len() {
+        match file.read(&mut head[got..]) {
+            Ok(0) => break,
+            Ok(k) => got += k,
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+            Err(e) => return Err(open_error(e)),
+        }
+    }
+    let head = &head[..got];
+    if !SIGNATURES.iter().any(|s| head.starts_with(s)) {
+        let shown: Vec<String> = head.iter().map(|b| format!("{b:02x}")).collect();
+        return Err(decode_error(
+            name,
+            format!(
+                "unrecognised format (PNG and JPEG are supported; the file starts with [{}])",
+                shown.join(" ")
+            ),
+        ));
+    }
+    let mut bytes = head.to_vec();
+    // One byte past the limit tells a file at the limit from one over it.
+    file.take(MAX_IMAGE_FILE_BYTES + 1 - head.len() as u64)
+        .read_to_end(&mut bytes)
+        .map_err(open_error)?;
+    if bytes.len() as u64 > MAX_IMAGE_FILE_BYTES {
+        return Err(decode_error(
+            name,
+            format!(
+                "the file is over the {} MiB limit on image files",
+                MAX_IMAGE_FILE_BYTES >> 20
+            ),
+        ));
+    }
+    Ok(bytes)
 }
 
 fn decode_error(source_name: &str, reason: String) -> ImageError {
@@ -281,4 +333,44 @@ pub fn gray_from_dynamic(img: &DynamicImage, source_name: &str) -> Result<GrayIm
         }
     };
     GrayImage::from_raw(w, h, channels, pixels).map_err(|e| decode_error(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn reason(e: ImageError) -> String {
+        e.to_string()
+    }
+
+    #[test]
+    fn a_file_that_does_not_start_like_an_image_is_refused_from_its_first_bytes() {
+        // /dev/zero never ends: read whole, it would fill memory.
+        let e = reason(GrayImage::open("/dev/zero").unwrap_err());
+        assert!(
+            e.contains("unrecognised format") && e.contains("[00 00 00 00 00 00 00 00]"),
+            "{e}"
+        );
+        let dir = std::env::temp_dir().join(format!("affcorr-gray-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let text = dir.join("text.png");
+        std::fs::write(&text, b"hello").unwrap();
+        let e = reason(GrayImage::open(&text).unwrap_err());
+        assert!(e.contains("[68 65 6c 6c 6f]"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_file_over_the_size_limit_is_refused_naming_the_limit() {
+        let dir = std::env::temp_dir().join(format!("affcorr-big-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let big = dir.join("big.png");
+        // A PNG signature, then a sparse hole: 300 MiB on paper, nothing on disk.
+        let f = std::fs::File::create(&big).unwrap();
+        std::io::Write::write_all(&mut &f, b"\x89PNG\r\n\x1a\n").unwrap();
+        f.set_len(300 << 20).unwrap();
+        let e = reason(GrayImage::open(&big).unwrap_err());
+        assert!(e.contains("over the 256 MiB limit"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
