@@ -295,12 +295,21 @@ impl CheckedModel {
     }
 }
 
-/// The intra-op thread count of `threads` (`None`: every core).
+/// The most threads a model (or the pipeline) may be given. Each thread costs a stack and a
+/// share of every inference; far more threads than cores only slow ONNX Runtime down, and
+/// `threads = 10**6` used to spawn threads until memory ran out instead of failing.
+pub const MAX_THREADS: usize = 1024;
+
+/// The intra-op thread count of `threads` (`None`: every core); 1 to [`MAX_THREADS`].
 pub fn resolve_threads(threads: Option<usize>) -> Result<usize> {
     match threads {
         Some(0) => Err(RunnerError::invalid(
             "threads",
             "must be at least 1 (or None for every core)",
+        )),
+        Some(t) if t > MAX_THREADS => Err(RunnerError::invalid(
+            "threads",
+            format!("{t} is over the limit of {MAX_THREADS} (or None for every core)"),
         )),
         Some(t) => Ok(t),
         None => Ok(ort_env::default_threads()),
@@ -493,4 +502,22 @@ pub(crate) fn output<'a, T: ort::value::PrimitiveTensorElementType>(
         });
     }
     Ok(data)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn thread_counts_are_bounded_and_the_message_gives_the_bound() {
+        assert_eq!(resolve_threads(Some(1)).unwrap(), 1);
+        assert_eq!(resolve_threads(Some(MAX_THREADS)).unwrap(), MAX_THREADS);
+        let e = resolve_threads(Some(1_000_000)).unwrap_err().to_string();
+        assert_eq!(
+            e,
+            "threads: 1000000 is over the limit of 1024 (or None for every core)"
+        );
+        assert!(resolve_threads(Some(0)).is_err());
+        assert!(resolve_threads(None).unwrap() >= 1);
+    }
 }

@@ -63,14 +63,15 @@ pub struct ShapeBins {
 }
 
 impl ShapeBins {
-    /// Bins from angle centres (radians, finite, |c| ≤ 2π) and scale factors (finite, > 0);
+    /// Bins from angle centres (radians, finite, |c| ≤ 2π) and scale factors (in
+    /// [`SCALE_BIN_RANGE`]);
     /// both lists non-empty.
     pub fn new(angles: Vec<f64>, scales: Vec<f64>) -> Result<Self> {
         check_bins("angle_bins", &angles, |c| {
             c.abs() <= 2.0 * std::f64::consts::PI
         })
         .map_err(|r| RunnerError::invalid("angle_bins", r))?;
-        check_bins("scale_bins", &scales, |s| s > 0.0)
+        check_bins("scale_bins", &scales, scale_bin_ok)
             .map_err(|r| RunnerError::invalid("scale_bins", r))?;
         Ok(Self {
             sin: angles.iter().map(|c| c.sin()).collect(),
@@ -119,7 +120,8 @@ fn check_bins(
     }
     match values.iter().position(|&v| !(v.is_finite() && ok(v))) {
         Some(i) => Err(format!(
-            "{what}[{i}] = {} is out of range (angles: radians with |c| ≤ 2π; scales: > 0)",
+            "{what}[{i}] = {} is out of range (angles: radians with |c| ≤ 2π; scales: factors \
+             in [1e-6, 1e6])",
             values[i]
         )),
         None => Ok(()),
@@ -463,9 +465,29 @@ impl ShapeModel {
     }
 }
 
+/// The largest `batch_size`: 65 536 patch pairs, 512 MiB of float32 patches per run.
+pub const MAX_BATCH_SIZE: usize = 1 << 16;
+
+/// The range of a scale bin: a factor beyond it decodes to scales no image pair has, and
+/// overflows (exp of the weighted log) for the absurd ones, failing far from the model.
+pub const SCALE_BIN_RANGE: (f64, f64) = (1e-6, 1e6);
+
+fn scale_bin_ok(s: f64) -> bool {
+    (SCALE_BIN_RANGE.0..=SCALE_BIN_RANGE.1).contains(&s)
+}
+
 fn check_options(options: &ShapeModelOptions) -> Result<usize> {
     if options.batch_size == 0 {
         return Err(RunnerError::invalid("batch_size", "must be at least 1"));
+    }
+    if options.batch_size > MAX_BATCH_SIZE {
+        return Err(RunnerError::invalid(
+            "batch_size",
+            format!(
+                "{} is over the limit of {MAX_BATCH_SIZE}",
+                options.batch_size
+            ),
+        ));
     }
     contract::resolve_threads(options.threads)
 }
@@ -550,7 +572,7 @@ fn check_contract(
     let angles = parse_bins(key("angle_bins"), "angle_bins", &mut problems, |c| {
         c.abs() <= 2.0 * std::f64::consts::PI
     });
-    let scales = parse_bins(key("scale_bins"), "scale_bins", &mut problems, |s| s > 0.0);
+    let scales = parse_bins(key("scale_bins"), "scale_bins", &mut problems, scale_bin_ok);
     let bins = match (angles, scales) {
         (Some(a), Some(s)) => ShapeBins::new(a, s).ok(),
         _ => None,
@@ -723,6 +745,35 @@ fn fmt_dims(dims: &[i64]) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn absurd_scale_bins_and_batch_sizes_are_refused_with_the_bound() {
+        for bad in [1e300, 1e-300, 0.0] {
+            let e = ShapeBins::new(vec![0.0], vec![1.0, bad])
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("scale_bins[1]") && e.contains("[1e-6, 1e6]"),
+                "{e}"
+            );
+        }
+        let big = ShapeModelOptions {
+            threads: Some(1),
+            batch_size: MAX_BATCH_SIZE + 1,
+        };
+        let e = check_options(&big).unwrap_err().to_string();
+        assert_eq!(e, "batch_size: 65537 is over the limit of 65536");
+        let many = ShapeModelOptions {
+            threads: Some(1 << 20),
+            batch_size: 1,
+        };
+        assert!(
+            check_options(&many)
+                .unwrap_err()
+                .to_string()
+                .contains("limit of 1024")
+        );
+    }
 
     #[test]
     fn softmax_mean_decoding() {
