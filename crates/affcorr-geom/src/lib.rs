@@ -13,6 +13,30 @@
 //! - [`batch`]: the rayon policy shared by all batched functions.
 //!
 //! Every batched function has a scalar twin that the hot loops of later crates call.
+//!
+//! # Example
+//!
+//! The AC a homography induces at a point, its decomposition `A = s·R(θ)·A′`, and its
+//! affine Sampson distances under an F compatible with H (`F = [e]× H`), which vanish:
+//!
+//! ```
+//! use affcorr_geom::affine::decompose;
+//! use affcorr_geom::epipolar::skew;
+//! use affcorr_geom::homography::ac_from_homography;
+//! use affcorr_geom::sampson::{sampson_affine, sampson_point};
+//! use affcorr_geom::{Mat3, Vec2, Vec3};
+//!
+//! let h = Mat3::new(0.76, -0.30, 225.7, 0.33, 1.01, -77.0, 3.5e-4, -1.4e-5, 1.0);
+//! let ac = ac_from_homography(&h, &Vec2::new(100.0, 200.0), 0)?;
+//! let shape = decompose(&ac.a, 0)?; // orientation (rad), scale, residual shape
+//! assert!((shape.scale - ac.a.determinant().sqrt()).abs() < 1e-12);
+//!
+//! let f = skew(&Vec3::new(1500.0, -400.0, 1.0)) * h;
+//! let f = f / f.norm();
+//! assert!(sampson_point(&f, &ac.points()).abs() < 1e-9);
+//! assert!(sampson_affine(&f, &ac).iter().all(|d| d.abs() < 1e-9));
+//! # Ok::<(), affcorr_geom::GeomError>(())
+//! ```
 
 pub mod affine;
 pub mod batch;
