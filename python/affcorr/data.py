@@ -1,4 +1,5 @@
-"""Small real test data shipped in the repository (data/), and readers for it."""
+"""Small real test data shipped inside the package (affcorr/sample_data/; the repository's
+data/graffiti links to it), and readers for it."""
 
 from __future__ import annotations
 
@@ -8,19 +9,20 @@ from pathlib import Path
 
 import numpy as np
 
+#: The bundled data: graffiti 1 and 3 with their ground-truth H (1.9 MB, see its README.md).
+PACKAGE_DATA = Path(__file__).resolve().parent / "sample_data"
+
 
 def data_dir() -> Path:
-    """The repository's data/ folder: $AFFCORR_DATA, else the first data/ found walking up
-    from the current directory or from this file."""
+    """The folder that holds ``graffiti/``: $AFFCORR_DATA when set, else the copy bundled in the
+    package (so that ``affcorr demo`` runs from any directory and from a wheel)."""
     env = os.environ.get("AFFCORR_DATA")
     if env:
         return Path(env)
-    for start in (Path.cwd(), Path(__file__).resolve()):
-        for d in (start, *start.parents):
-            if (d / "data" / "graffiti" / "H1to3p.xml").is_file():
-                return d / "data"
+    if (PACKAGE_DATA / "graffiti" / "H1to3p.xml").is_file():
+        return PACKAGE_DATA
     raise FileNotFoundError(
-        "affcorr's data/ folder was not found: run from the repository or set AFFCORR_DATA"
+        f"affcorr's bundled data is missing ({PACKAGE_DATA}): reinstall affcorr or set AFFCORR_DATA"
     )
 
 
@@ -38,6 +40,22 @@ def read_gray(path: Path) -> np.ndarray:
     from PIL import Image
 
     return np.asarray(Image.open(path).convert("L"), dtype=np.float64) / 255.0
+
+
+def graffiti_files() -> tuple[Path, Path, np.ndarray]:
+    """(image 1 path, image 3 path, H 1→3) of the bundled graffiti pair; needs no Pillow."""
+    d = data_dir() / "graffiti"
+    return d / "graf1.png", d / "graf3.png", read_opencv_matrix(d / "H1to3p.xml")
+
+
+def picture_note() -> str | None:
+    """None when matplotlib is installed; else the one line the demos print instead of a
+    picture."""
+    import importlib.util
+
+    if importlib.util.find_spec("matplotlib") is not None:
+        return None
+    return "picture skipped: it needs matplotlib: pip install 'affcorr[plot]'"
 
 
 def graffiti() -> tuple[np.ndarray, np.ndarray, np.ndarray]:

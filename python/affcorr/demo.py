@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 import affcorr
-from affcorr.data import graffiti
+from affcorr.data import graffiti_files, picture_note
 
 PATCH_RADIUS = 12.0
 
@@ -59,7 +59,9 @@ def run(out: Path | None = Path("affcorr_demo.png"), step: int = 40) -> dict:
     """Runs the demo, prints a report and returns its figures."""
     timings = {}
     t0 = time.perf_counter()
-    img1, img3, H = graffiti()
+    file_1, file_3, H = graffiti_files()
+    img1 = affcorr.read_gray_image(file_1).astype(np.float64)
+    img3 = affcorr.read_gray_image(file_3).astype(np.float64)
     timings["load images"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
@@ -123,7 +125,9 @@ def run(out: Path | None = Path("affcorr_demo.png"), step: int = 40) -> dict:
     for k, v in timings.items():
         print(f"  {k:<28} {1e3 * v:8.2f} ms")
 
-    if out is not None:
+    if out is not None and picture_note() is not None:
+        print(f"\n{picture_note()}")
+    elif out is not None:
         _draw(img1, img3, corrs, ncc["full affine A"], Path(out))
         print(f"\npicture: {out}")
     return {"corrs": corrs, "ncc": ncc, "sd_p": sd_p, "sd_a": sd_a, "sd_a_wrong": sd_a_wrong}
@@ -157,5 +161,6 @@ def _draw(img1, img3, corrs, ncc, out: Path) -> None:
     sm = plt.cm.ScalarMappable(cmap=cmap, norm=plt.Normalize(0, 1))
     fig.colorbar(sm, ax=axes, shrink=0.7, label="patch NCC under the full affine map")
     fig.suptitle("affcorr: affine correspondences induced by the ground-truth homography")
-    fig.savefig(out, dpi=90)
+    with open(out, "wb") as f:  # exactly `out`, format from its suffix
+        fig.savefig(f, format=Path(out).suffix.lstrip(".").lower() or "png", dpi=90)
     plt.close(fig)

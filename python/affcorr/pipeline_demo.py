@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 import affcorr
-from affcorr.data import data_dir, graffiti
+from affcorr.data import graffiti_files, picture_note
 from affcorr.metrics import affine_errors, corner_error, correct_mask
 from affcorr.pipeline import PIPELINE_DEFAULTS
 
@@ -26,9 +26,9 @@ def run(
     max_keypoints: int = PIPELINE_DEFAULTS["max_keypoints"],
 ) -> dict:
     """Runs the demo, prints its report and returns its figures."""
-    d = data_dir() / "graffiti"
-    path_a, path_b = str(d / "graf1.png"), str(d / "graf3.png")
-    img_a, _, H_gt = graffiti()
+    file_a, file_b, H_gt = graffiti_files()
+    path_a, path_b = str(file_a), str(file_b)
+    img_a = affcorr.read_gray_image(path_a)
 
     t0 = time.perf_counter()
     pipe = affcorr.Pipeline(matcher=matcher, max_keypoints=max_keypoints)
@@ -68,7 +68,9 @@ def run(
         f"{np.median(fro[correct]):.3f}, mean cosine similarity "
         f"{cos[correct].mean():.3f}"
     )
-    if out is not None:
+    if out is not None and picture_note() is not None:
+        print(f"\n{picture_note()}")
+    elif out is not None:
         from affcorr.plot import draw_matches
 
         draw_matches(path_a, path_b, corrs, out, H=H_gt, title="affcorr on graffiti 1→3")
