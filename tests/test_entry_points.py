@@ -92,6 +92,7 @@ def test_python_and_cli_defaults_are_the_rust_crates():
         "max_keypoints",
         "dense_matches",
         "refine_affine",
+        "views",
         "seed",
         "homography_threshold",
         "fundamental_threshold",
@@ -102,6 +103,7 @@ def test_python_and_cli_defaults_are_the_rust_crates():
     assert init["max_keypoints"].default == d["max_keypoints"]
     assert init["refine_affine"].default == d["refine_affine"]
     assert init["seed"].default == d["seed"]
+    assert init["views"].default == d["views"]
     for method, key in [
         (affcorr.Pipeline.homography, "homography_threshold"),
         (affcorr.Pipeline.fundamental, "fundamental_threshold"),

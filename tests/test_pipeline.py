@@ -141,6 +141,7 @@ def test_match_result_layout_and_certainty(data):
         "patches",
         "shape_net",
         "affine_refine",
+        "views",
         "ransac",
         "total",
     }

@@ -20,9 +20,10 @@ use crate::errors::{image_error, pipeline_error, runner_error};
 use crate::image::gray_image;
 use crate::ransac::{mat_result, nan_mat3, nan_pose, outcome, parse_options, pose_result};
 use affcorr::pipeline::defaults::{self, Geometry};
+use affcorr::pipeline::views::ViewImage;
 use affcorr::pipeline::{
     AffineRefineOptions, Estimated, GrayImage, ImageSource, Matcher, Matches, Pipeline,
-    PipelineError, RgbImage, init_ort as init, model_file,
+    PipelineError, RgbImage, ViewOptions, ViewReport, init_ort as init, model_file,
 };
 use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
@@ -37,6 +38,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     d.set_item("max_keypoints", defaults::MAX_KEYPOINTS)?;
     d.set_item("dense_matches", defaults::DENSE_MATCHES)?;
     d.set_item("refine_affine", defaults::REFINE_AFFINE)?;
+    d.set_item("views", defaults::VIEWS.name())?;
     d.set_item("seed", defaults::SEED)?;
     d.set_item("homography_threshold", defaults::HOMOGRAPHY_THRESHOLD)?;
     d.set_item("fundamental_threshold", defaults::FUNDAMENTAL_THRESHOLD)?;
@@ -128,9 +130,39 @@ type MatchTuple<'py> = (
     Bound<'py, PyAny>,
     Bound<'py, PyDict>,
     (usize, usize),
+    Bound<'py, PyList>,
 );
 
-/// `(corrs (N, 8), certainty (N,), timings {stage: seconds}, (keypoints A, keypoints B))`.
+/// The view cascade's report: one dict per view tried (`label`, `image` "A" | "B" | None,
+/// `rotation` (rad), `scale`, `tilt`, `tilt_angle` (rad), `guided`, `matches`, `inliers`,
+/// `verified`, `seconds`).
+fn view_reports<'py>(py: Python<'py>, views: &[ViewReport]) -> PyResult<Bound<'py, PyList>> {
+    let out = PyList::empty(py);
+    for v in views {
+        let d = PyDict::new(py);
+        d.set_item("label", v.view.label())?;
+        let image = match v.view.image {
+            ViewImage::None => None,
+            ViewImage::A => Some("A"),
+            ViewImage::B => Some("B"),
+        };
+        d.set_item("image", image)?;
+        d.set_item("rotation", v.view.rotation)?;
+        d.set_item("scale", v.view.scale)?;
+        d.set_item("tilt", v.view.tilt)?;
+        d.set_item("tilt_angle", v.view.tilt_angle)?;
+        d.set_item("guided", v.view.guided.map(|m| m.to_vec()))?;
+        d.set_item("matches", v.matches)?;
+        d.set_item("inliers", v.inliers)?;
+        d.set_item("verified", v.verified)?;
+        d.set_item("seconds", v.time.as_secs_f64())?;
+        out.append(d)?;
+    }
+    Ok(out)
+}
+
+/// `(corrs (N, 8), certainty (N,), timings {stage: seconds}, (keypoints A, keypoints B),
+/// views [report per view])`.
 fn match_tuple<'py>(
     py: Python<'py>,
     m: Matches,
@@ -149,6 +181,7 @@ fn match_tuple<'py>(
         to_numpy(py, &[n], m.certainty)?.into_any(),
         d,
         m.num_keypoints,
+        view_reports(py, &m.views)?,
     ))
 }
 
@@ -165,7 +198,8 @@ impl PipelineRunner {
         *, matcher, shape_model, backbone_model = None, refine_model = None,
         lighterglue_model = None, dense_model = None, ort_library = None, max_keypoints = None,
         max_matches = None, max_side = None, threads = None, seed = defaults::SEED,
-        refine_affine = defaults::REFINE_AFFINE
+        refine_affine = defaults::REFINE_AFFINE, views = None, view_budget = None,
+        max_views = None
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -183,6 +217,9 @@ impl PipelineRunner {
         threads: Option<usize>,
         seed: u64,
         refine_affine: bool,
+        views: Option<&str>,
+        view_budget: Option<f64>,
+        max_views: Option<usize>,
     ) -> PyResult<Self> {
         let matcher: Matcher = matcher.parse().map_err(|e| runner_error(e, None))?;
         let mut b = Pipeline::builder()
@@ -220,6 +257,22 @@ impl PipelineRunner {
             b = b.threads(n);
         }
         b = b.affine_refinement(refine_affine.then(AffineRefineOptions::default));
+        let mut view_options = ViewOptions::default();
+        if let Some(mode) = views {
+            view_options.mode = mode.parse().map_err(|e| pipeline_error(e, None))?;
+        }
+        if let Some(seconds) = view_budget {
+            if !(seconds >= 0.0 && seconds.is_finite()) {
+                return Err(PyValueError::new_err(format!(
+                    "view_budget must be a non-negative number of seconds or None, got {seconds}"
+                )));
+            }
+            view_options.time_budget = Some(Duration::from_secs_f64(seconds));
+        }
+        if let Some(n) = max_views {
+            view_options.max_views = n;
+        }
+        b = b.views(view_options);
         py.detach(|| {
             init(ort_library.as_deref())?;
             b.build()
@@ -396,6 +449,12 @@ impl PipelineRunner {
     #[getter]
     fn seed(&self) -> u64 {
         self.inner.seed()
+    }
+
+    /// The view cascade's mode: "off", "auto" or "full".
+    #[getter]
+    fn views(&self) -> &'static str {
+        self.inner.views().mode.name()
     }
 
     /// The matcher model's custom metadata: the XFeat backbone's, or the dense matcher's.

@@ -40,7 +40,7 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Union
 
@@ -61,7 +61,7 @@ __all__ = [
 ]
 
 #: The pipeline's defaults, one set for Rust, Python and the CLI (from ``affcorr-pipeline``):
-#: ``matcher``, ``max_keypoints``, ``dense_matches``, ``refine_affine``, ``seed``,
+#: ``matcher``, ``max_keypoints``, ``dense_matches``, ``refine_affine``, ``views``, ``seed``,
 #: ``homography_threshold``, ``fundamental_threshold``, ``pose_threshold`` (pixels).
 PIPELINE_DEFAULTS: dict[str, Any] = dict(_native.PIPELINE_DEFAULTS)
 
@@ -96,15 +96,30 @@ class MatchResult:
             in the original images' pixels, most certain first.
         certainty: ``(N,)`` the matcher's certainty of each match (higher is better).
         timings: seconds per stage: ``decode``, ``matcher``, ``detection``, ``matching``,
-            ``patches``, ``shape_net``, ``affine_refine`` (0 unless enabled), ``ransac`` (0
-            unless estimated), ``total``.
+            ``patches``, ``shape_net``, ``affine_refine`` (0 unless enabled), ``views`` (the
+            view cascade: verification and synthetic views, whose own stages are counted in
+            the stages above too), ``ransac`` (0 unless estimated), ``total``.
         num_keypoints: keypoints (or semi-dense cells) found in image A and in image B.
+        views: the view cascade's report, one dict per view tried, the plain pair first
+            (``label``, ``image`` "A" / "B" / None, ``rotation`` and ``tilt_angle`` in
+            radians, ``scale``, ``tilt``, ``guided``, ``matches``, ``inliers``, ``verified``,
+            ``seconds``); empty when the cascade did not run (``views="off"``, dense matchers).
     """
 
     corrs: NDArray[np.float64]
     certainty: NDArray[np.float64]
     timings: dict[str, float]
     num_keypoints: tuple[int, int]
+    views: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def view(self) -> dict[str, Any] | None:
+        """The view that produced the ACs: the verified one with the most inliers, else the
+        plain pair; None when the cascade did not run."""
+        verified = [v for v in self.views if v["verified"]]
+        if verified:
+            return max(verified, key=lambda v: v["inliers"])
+        return self.views[0] if self.views else None
 
     def __len__(self) -> int:
         return len(self.corrs)
@@ -152,6 +167,14 @@ class Pipeline:
             RoMa to it; none is shipped).
         seed: seed of the dense matcher's balanced sampling (the same seed gives the same
             matches).
+        views: the view cascade for pairs the plain matcher cannot solve (large in-plane
+            rotation, zoom, tilt): ``"auto"`` (the default) verifies the plain pair's matches
+            with a fundamental matrix and, when too few agree, matches synthetic views
+            (rotations, zooms, ASIFT tilts) until one verifies, mapping every AC back through
+            the view's warp; ``"full"`` tries every view and keeps the best; ``"off"`` the
+            plain pair only. Easy pairs cost one verification. See :attr:`MatchResult.views`.
+        view_budget: seconds after which the cascade starts no new view (None: no limit).
+        max_views: at most this many synthetic views (None: the default, 32).
         refine_affine: refine the network's ACs against the images by affine Lucas-Kanade
             (:func:`affcorr.refine_affine` with its defaults; x2 moves too). On by default; its
             effect is measured in benches/results/eval/affine.md and
@@ -182,6 +205,9 @@ class Pipeline:
         dense_model: str | os.PathLike[str] | None = None,
         seed: int = _D["seed"],
         refine_affine: bool = _D["refine_affine"],
+        views: str = _D["views"],
+        view_budget: float | None = None,
+        max_views: int | None = None,
     ) -> None:
         if matcher is None:
             matcher = "dense" if dense_model is not None else _D["matcher"]
@@ -228,6 +254,9 @@ class Pipeline:
             threads=threads,
             seed=int(seed),
             refine_affine=bool(refine_affine),
+            views=views,
+            view_budget=view_budget,
+            max_views=_positive(max_views, "max_views"),
         )
 
     # ----------------------------------------------------------------- properties
@@ -246,6 +275,11 @@ class Pipeline:
     def seed(self) -> int:
         """The seed of a dense matcher's balanced sampling."""
         return self._runner.seed
+
+    @property
+    def views(self) -> str:
+        """The view cascade's mode: ``"off"``, ``"auto"`` or ``"full"``."""
+        return self._runner.views
 
     @property
     def matcher_metadata(self) -> dict[str, str]:

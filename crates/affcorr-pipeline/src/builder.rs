@@ -11,6 +11,7 @@ use affcorr_runner::{
 use crate::defaults;
 use crate::error::{PipelineError, Result};
 use crate::pipeline::Pipeline;
+use crate::views::ViewOptions;
 
 /// The XFeat backbone's file name in a models directory ([`PipelineBuilder::models_dir`]).
 pub const BACKBONE_FILE: &str = "xfeat_backbone.onnx";
@@ -50,6 +51,7 @@ pub struct PipelineBuilder {
     threads: Option<usize>,
     shape_batch_size: usize,
     affine_refinement: Option<AffineRefineOptions>,
+    views: ViewOptions,
     seed: u64,
 }
 
@@ -69,6 +71,7 @@ impl Default for PipelineBuilder {
             threads: None,
             shape_batch_size: affcorr_runner::shape::DEFAULT_BATCH_SIZE,
             affine_refinement: defaults::REFINE_AFFINE.then(AffineRefineOptions::default),
+            views: ViewOptions::default(),
             seed: defaults::SEED,
         }
     }
@@ -174,6 +177,14 @@ impl PipelineBuilder {
         self
     }
 
+    /// The view cascade for pairs the plain matcher cannot solve (rotation, zoom, tilt; see
+    /// [`crate::views`]). Default: [`ViewOptions::default`], mode [`defaults::VIEWS`]. Dense
+    /// matchers never use it.
+    pub fn views(mut self, options: ViewOptions) -> Self {
+        self.views = options;
+        self
+    }
+
     fn path(&self, explicit: &Option<PathBuf>, file: &str, what: &'static str) -> Result<PathBuf> {
         explicit
             .clone()
@@ -217,6 +228,7 @@ impl PipelineBuilder {
                 format!("{s} is below the matcher's minimum of 32 pixels"),
             ));
         }
+        self.views.validate()?;
         let threads = affcorr_runner::resolve_threads(self.threads)?;
         let mut files = MatcherFiles::default();
         for &role in self.matcher.models() {
@@ -264,6 +276,7 @@ impl PipelineBuilder {
             matcher,
             shape,
             affine_refinement: self.affine_refinement.clone(),
+            views: self.views.clone(),
             max_matches,
             max_side: self.max_side,
             threads,

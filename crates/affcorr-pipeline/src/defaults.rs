@@ -10,6 +10,8 @@
 use affcorr_ransac::EstimatorOptions;
 use affcorr_runner::Matcher;
 
+use crate::views::ViewMode;
+
 /// The default matcher: XFeat keypoints matched by LighterGlue (the most correct matches of
 /// the shipped matchers).
 pub const MATCHER: Matcher = Matcher::XFeatLighterGlue;
@@ -23,6 +25,15 @@ pub const DENSE_MATCHES: usize = 2000;
 
 /// Whether the network's ACs are refined against the images by affine Lucas–Kanade.
 pub const REFINE_AFFINE: bool = true;
+
+/// The view cascade: synthetic views only when the plain pair fails verification.
+pub const VIEWS: ViewMode = ViewMode::Auto;
+
+/// The view cascade's verification: at least this many inliers to a fundamental matrix...
+pub const VIEW_MIN_INLIERS: usize = 30;
+
+/// ... making up at least this share of the matches.
+pub const VIEW_MIN_INLIER_RATIO: f64 = 0.25;
 
 /// The seed of a dense matcher's balanced sampling and of the robust estimators.
 pub const SEED: u64 = 0;

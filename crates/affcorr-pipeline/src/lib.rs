@@ -41,7 +41,10 @@
 //!    images, the shape network's A at them ([`affcorr_runner::ShapeEstimator`]).
 //! 6. **affine refine**: affine Lucas–Kanade against the working images
 //!    ([`affcorr_image::refine_affine`]; on by default, [`PipelineBuilder::affine_refinement`]).
-//! 7. The ACs are mapped back to the original pixels (pixel centres at integers, image edges
+//! 7. **views**: unless the plain pair verifies (a fundamental matrix with enough inliers),
+//!    synthetic views (rotations, zooms, tilts) are matched until one does, and their ACs are
+//!    mapped back through the view's warp ([`views`]; on by default, [`ViewMode::Auto`]).
+//! 8. The ACs are mapped back to the original pixels (pixel centres at integers, image edges
 //!    aligned): x = (x_work + 0.5)/s − 0.5 per axis, and A = diag(1/s_B) · A_work · diag(s_A)
 //!    (A = ∂x2/∂x1, docs/design.md §2; [`affcorr_image::ac_to_original`]).
 //!
@@ -59,6 +62,7 @@
 //! - [`builder`]: [`PipelineBuilder`], model paths and options.
 //! - [`pipeline`]: [`Pipeline`]: `match_pair`, `match_pairs` and the estimators.
 //! - [`source`]: [`ImageSource`], the image arguments (files, gray or colour buffers).
+//! - [`views`]: the view cascade for rotated, zoomed and tilted pairs.
 //! - [`result`]: [`Matches`], [`Timings`] and [`Estimated`].
 //! - [`error`]: [`PipelineError`], which says which stage failed.
 
@@ -68,6 +72,7 @@ pub mod error;
 pub mod pipeline;
 pub mod result;
 pub mod source;
+pub mod views;
 
 pub use builder::{
     BACKBONE_FILE, DENSE_FILE, LIGHTERGLUE_FILE, PipelineBuilder, REFINE_FILE, SHAPE_FILE,
@@ -78,6 +83,7 @@ pub use error::{PipelineError, Result};
 pub use pipeline::{MAX_WORKING_PIXELS, Pipeline};
 pub use result::{Estimated, Matches, Timings};
 pub use source::ImageSource;
+pub use views::{ViewMode, ViewOptions, ViewReport, ViewSpec};
 
 pub use affcorr_image::{AffineRefineOptions, GrayImage, RgbImage};
 pub use affcorr_ransac::EstimatorOptions;

@@ -7,7 +7,8 @@ use std::time::{Duration, Instant};
 use affcorr_geom::Mat3;
 use affcorr_geom::camera::Intrinsics;
 use affcorr_image::{
-    AffineRefineOptions, GrayImage, ac_to_original, extract_named, limit_side, refine_affine,
+    AffineRefineOptions, AffineWarp, GrayImage, RgbImage, ac_from_views, ac_to_original,
+    extract_named, limit_side, refine_affine, warp_image,
 };
 use affcorr_ransac::problems::relpose::PoseModel;
 use affcorr_ransac::{
@@ -20,6 +21,9 @@ use crate::builder::PipelineBuilder;
 use crate::error::{PipelineError, Result};
 use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
+use crate::views::{
+    ViewImage, ViewMode, ViewOptions, ViewReport, ViewSpec, candidate_views, guided_view, verify,
+};
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
 /// the pixels, ≈160 MB per megapixel (benches/results/bad_input_scale.md: 12 MP 2.0 GB, 48 MP
@@ -49,6 +53,7 @@ pub struct Pipeline {
     pub(crate) matcher: PointMatcher,
     pub(crate) shape: ShapeEstimator,
     pub(crate) affine_refinement: Option<AffineRefineOptions>,
+    pub(crate) views: ViewOptions,
     pub(crate) max_matches: Option<usize>,
     pub(crate) max_side: Option<usize>,
     pub(crate) threads: usize,
@@ -58,6 +63,13 @@ pub struct Pipeline {
     /// `threads` single-threaded copies for `match_pairs`, built on its first call (or the
     /// error that prevented it, as text: then batches run one pair after the other).
     pub(crate) workers: OnceLock<std::result::Result<Vec<Pipeline>, String>>,
+}
+
+/// ACs of two (working or view) images, before the map back to the original pixels.
+struct WorkMatches {
+    corrs: Vec<[f64; 8]>,
+    certainty: Vec<f64>,
+    num_keypoints: (usize, usize),
 }
 
 fn elapsed(t: &mut Instant) -> Duration {
@@ -111,6 +123,11 @@ impl Pipeline {
     /// The seed of the dense matcher's sampling.
     pub fn seed(&self) -> u64 {
         self.matcher.seed()
+    }
+
+    /// The view cascade's options.
+    pub fn views(&self) -> &ViewOptions {
+        &self.views
     }
 
     /// The affine refinement's options (`None` when it is off).
@@ -290,11 +307,41 @@ impl Pipeline {
         }
         timings.decode += elapsed(&mut t);
 
-        let raw = self.matcher.match_images(
-            &work_a,
-            &work_b,
-            colour.as_ref().map(|(ca, cb)| (ca, cb)),
-        )?;
+        let colour = colour.as_ref().map(|(ca, cb)| (ca, cb));
+        let plain = self.match_working(&work_a, &work_b, colour, &mut timings)?;
+        let (work, views) = if dense || self.views.mode == ViewMode::Off {
+            (plain, Vec::new())
+        } else {
+            let t = Instant::now();
+            let r = self.view_cascade(plain, &work_a, &work_b, &mut timings)?;
+            timings.views += t.elapsed();
+            r
+        };
+        let corrs = work
+            .corrs
+            .iter()
+            .map(|row| ac_to_original(row, sa, sb))
+            .collect();
+        timings.total = start.elapsed();
+        Ok(Matches {
+            corrs,
+            certainty: work.certainty,
+            num_keypoints: work.num_keypoints,
+            timings,
+            views,
+        })
+    }
+
+    /// Matches, patches, shape network and refinement on two images (the working images, or
+    /// synthetic views of them): ACs in those images' pixels, most certain first.
+    fn match_working(
+        &self,
+        work_a: &GrayImage,
+        work_b: &GrayImage,
+        colour: Option<(&RgbImage, &RgbImage)>,
+        timings: &mut Timings,
+    ) -> Result<WorkMatches> {
+        let raw = self.matcher.match_images(work_a, work_b, colour)?;
         timings.decode += raw.timings.preprocess;
         timings.matcher += raw.timings.network;
         timings.detection += raw.timings.detection;
@@ -316,12 +363,12 @@ impl Pipeline {
         let certainty: Vec<f64> = order.iter().map(|&i| raw.certainty[i] as f64).collect();
         timings.matching += elapsed(&mut t);
 
-        let patch_a = extract_named(&work_a, &x1, "x1")?;
-        let patch_b = extract_named(&work_b, &x2, "x2")?;
+        let patch_a = extract_named(work_a, &x1, "x1")?;
+        let patch_b = extract_named(work_b, &x2, "x2")?;
         timings.patches += elapsed(&mut t);
 
         let prediction = self.shape.model().predict(&patch_a, &patch_b)?;
-        let mut work: Vec<[f64; 8]> = prediction
+        let mut corrs: Vec<[f64; 8]> = prediction
             .affine()?
             .iter()
             .zip(x1.iter().zip(&x2))
@@ -329,16 +376,114 @@ impl Pipeline {
             .collect();
         timings.shape_net += elapsed(&mut t);
         if let Some(options) = &self.affine_refinement {
-            work = refine_affine(&work_a, &work_b, &work, options)?.corrs;
+            corrs = refine_affine(work_a, work_b, &corrs, options)?.corrs;
             timings.affine_refine += elapsed(&mut t);
         }
-        let corrs = work.iter().map(|row| ac_to_original(row, sa, sb)).collect();
-        timings.total = start.elapsed();
-        Ok(Matches {
+        Ok(WorkMatches {
             corrs,
             certainty,
             num_keypoints: raw.num_keypoints,
-            timings,
         })
+    }
+
+    /// The view cascade (see [`crate::views`]) after the plain pass `plain`: the matches of the
+    /// first view that verifies (or, in full mode, of the view with the most inliers), in the
+    /// working images' pixels, and a report per view. The stages of the synthetic views are
+    /// timed into `timings` too.
+    fn view_cascade(
+        &self,
+        plain: WorkMatches,
+        work_a: &GrayImage,
+        work_b: &GrayImage,
+        timings: &mut Timings,
+    ) -> Result<(WorkMatches, Vec<ViewReport>)> {
+        let o = &self.views;
+        let start = Instant::now();
+        let passes = |inliers: usize, n: usize| {
+            inliers >= o.min_inliers && inliers as f64 >= o.min_inlier_ratio * n as f64
+        };
+        let (inliers, mask) = verify(&plain.corrs)?;
+        let verified = passes(inliers, plain.corrs.len());
+        let mut reports = vec![ViewReport {
+            view: ViewSpec::PLAIN,
+            matches: plain.corrs.len(),
+            inliers,
+            verified,
+            time: start.elapsed(),
+        }];
+        if verified && o.mode == ViewMode::Auto {
+            return Ok((plain, reports));
+        }
+        let inlier_acs: Vec<[f64; 8]> = plain
+            .corrs
+            .iter()
+            .zip(&mask)
+            .filter(|(_, m)| **m)
+            .map(|(r, _)| *r)
+            .collect();
+        let mut queue: Vec<ViewSpec> = guided_view(&inlier_acs).into_iter().collect();
+        queue.extend(candidate_views());
+        queue.truncate(o.max_views);
+        let (mut best, mut best_inliers) = (plain, if verified { inliers } else { 0 });
+        for view in queue {
+            if o.time_budget.is_some_and(|b| start.elapsed() >= b) {
+                break;
+            }
+            let t = Instant::now();
+            let (a_warp, b_warp) = match view.image {
+                ViewImage::A => (
+                    Some(view.linear().fitted(work_a.width(), work_a.height())),
+                    None,
+                ),
+                ViewImage::B => (
+                    None,
+                    Some(view.linear().fitted(work_b.width(), work_b.height())),
+                ),
+                ViewImage::None => (None, None),
+            };
+            let warped = |img: &GrayImage, w: &Option<(AffineWarp, usize, usize)>| {
+                w.map(|(warp, vw, vh)| warp_image(img, &warp, vw, vh))
+                    .transpose()
+            };
+            let (va, vb) = (warped(work_a, &a_warp)?, warped(work_b, &b_warp)?);
+            // A view too small for the matcher is skipped, not an error of the pair.
+            let small =
+                |v: &Option<GrayImage>| v.as_ref().is_some_and(|v| v.width().min(v.height()) < 32);
+            if small(&va) || small(&vb) {
+                continue;
+            }
+            let m = self.match_working(
+                va.as_ref().unwrap_or(work_a),
+                vb.as_ref().unwrap_or(work_b),
+                None,
+                timings,
+            )?;
+            let (wa, wb) = (
+                a_warp.map_or(AffineWarp::IDENTITY, |w| w.0),
+                b_warp.map_or(AffineWarp::IDENTITY, |w| w.0),
+            );
+            let corrs: Vec<[f64; 8]> = m
+                .corrs
+                .iter()
+                .filter_map(|row| ac_from_views(row, &wa, &wb))
+                .collect();
+            let (inliers, _) = verify(&corrs)?;
+            let verified = passes(inliers, corrs.len());
+            reports.push(ViewReport {
+                view,
+                matches: corrs.len(),
+                inliers,
+                verified,
+                time: t.elapsed(),
+            });
+            if verified && inliers > best_inliers {
+                best_inliers = inliers;
+                best = WorkMatches { corrs, ..m };
+                if o.mode == ViewMode::Auto {
+                    break;
+                }
+            }
+        }
+        Ok((best, reports))
     }
 }

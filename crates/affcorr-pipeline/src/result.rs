@@ -6,6 +6,8 @@ use std::time::Duration;
 
 use affcorr_ransac::Estimate;
 
+use crate::views::ViewReport;
+
 /// Wall time of each stage of one pair (see the module docs for what each covers).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Timings {
@@ -25,6 +27,10 @@ pub struct Timings {
     /// The affine Lucas–Kanade refinement of the ACs (0 unless enabled,
     /// [`crate::PipelineBuilder::affine_refinement`]).
     pub affine_refine: Duration,
+    /// The view cascade: verifying the plain pass and matching synthetic views (0 unless it
+    /// ran, [`crate::PipelineBuilder::views`]); the views' own stages are counted in the stages
+    /// above as well.
+    pub views: Duration,
     /// Robust estimation (0 for `match_pair`).
     pub ransac: Duration,
     /// The whole call.
@@ -33,7 +39,7 @@ pub struct Timings {
 
 impl Timings {
     /// (name, duration) of each stage in order, then `"total"`.
-    pub fn stages(&self) -> [(&'static str, Duration); 9] {
+    pub fn stages(&self) -> [(&'static str, Duration); 10] {
         [
             ("decode", self.decode),
             ("matcher", self.matcher),
@@ -42,6 +48,7 @@ impl Timings {
             ("patches", self.patches),
             ("shape_net", self.shape_net),
             ("affine_refine", self.affine_refine),
+            ("views", self.views),
             ("ransac", self.ransac),
             ("total", self.total),
         ]
@@ -73,9 +80,22 @@ pub struct Matches {
     pub num_keypoints: (usize, usize),
     /// Wall time per stage.
     pub timings: Timings,
+    /// The views the cascade tried, the plain pair first (empty when it did not run, e.g.
+    /// with [`crate::views::ViewMode::Off`]).
+    pub views: Vec<ViewReport>,
 }
 
 impl Matches {
+    /// The view that produced these ACs: the verified one with the most inliers, else the
+    /// plain pair (`None` when the cascade did not run).
+    pub fn view(&self) -> Option<&ViewReport> {
+        self.views
+            .iter()
+            .filter(|v| v.verified)
+            .max_by_key(|v| v.inliers)
+            .or(self.views.first())
+    }
+
     /// The number of ACs.
     pub fn len(&self) -> usize {
         self.corrs.len()

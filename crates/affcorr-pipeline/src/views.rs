@@ -1,0 +1,372 @@
+//! View synthesis as a cascade, for pairs that the plain matcher cannot solve: large in-plane
+//! rotation, zoom and tilt (the idea of ASIFT and MODS; Morel & Yu 2009, Mishkin et al. 2015).
+//!
+//! 1. The plain pair is matched and **verified**: a fundamental matrix from 3-AC samples
+//!    (`affcorr_ransac::estimate_fundamental` with the pipeline's F threshold) must have at
+//!    least [`ViewOptions::min_inliers`] inliers making up at least
+//!    [`ViewOptions::min_inlier_ratio`] of the matches. F rather than H, so that non-planar
+//!    scenes verify; wrong matches rarely agree on one F.
+//! 2. If it fails (and [`ViewMode::Auto`]), synthetic views of one image are matched against
+//!    the other, in order, until one verifies ([`ViewMode::Full`] tries them all and keeps
+//!    the best):
+//!    - **AC-guided** first: when the plain pass has a few F-inliers, their median affine map
+//!      D says the dominant rotation, zoom and tilt; the view undoes it (B by D⁻¹, or A by D
+//!      when that shrinks instead of enlarging).
+//!    - in-plane **rotations** of B by 90°, 270°, 180° (the matchers hold up to about ±45°),
+//!      **zooms** of A or B by ½, the diagonal rotations, then zooms by ¼ (the matcher's
+//!      keypoint budget lands on the overlap);
+//!    - **tilts** t = 2 (4 directions) and t = 4 (8 directions) of A, then of B.
+//! 3. Every AC of a view is mapped back to the original images with its A composed with the
+//!    synthetic warp ([`affcorr_image::ac_from_views`]), so the ACs are correct in the
+//!    original pixels whichever view produced them.
+//!
+//! [`crate::Matches::views`] reports each view tried: its warp, matches, inliers and time.
+
+use std::fmt;
+use std::str::FromStr;
+use std::time::Duration;
+
+use affcorr_image::AffineWarp;
+use affcorr_ransac::{Correspondences, EstimatorOptions, RansacError, estimate_fundamental};
+
+use crate::defaults;
+use crate::error::{PipelineError, Result};
+
+/// Whether and how the pipeline synthesises views.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ViewMode {
+    /// The plain pair only (`"off"`).
+    Off,
+    /// Views only when the plain pair fails verification, stopping at the first that verifies
+    /// (`"auto"`).
+    Auto,
+    /// Every view, keeping the one with the most verified inliers (`"full"`).
+    Full,
+}
+
+impl ViewMode {
+    /// The name in APIs.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Off => "off",
+            Self::Auto => "auto",
+            Self::Full => "full",
+        }
+    }
+}
+
+impl fmt::Display for ViewMode {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl FromStr for ViewMode {
+    type Err = PipelineError;
+
+    fn from_str(s: &str) -> Result<Self> {
+        match s.to_ascii_lowercase().as_str() {
+            "off" => Ok(Self::Off),
+            "auto" => Ok(Self::Auto),
+            "full" => Ok(Self::Full),
+            _ => Err(PipelineError::invalid(
+                "views",
+                format!("unknown mode {s:?}; expected \"off\", \"auto\" or \"full\""),
+            )),
+        }
+    }
+}
+
+/// Options of the view cascade.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewOptions {
+    /// The mode (default [`defaults::VIEWS`]).
+    pub mode: ViewMode,
+    /// Stop starting views after this much time in the cascade (`None`: no limit).
+    pub time_budget: Option<Duration>,
+    /// At most this many synthetic views.
+    pub max_views: usize,
+    /// Verification: at least this many F-inliers.
+    pub min_inliers: usize,
+    /// Verification: F-inliers / matches at least this.
+    pub min_inlier_ratio: f64,
+}
+
+impl Default for ViewOptions {
+    fn default() -> Self {
+        Self {
+            mode: defaults::VIEWS,
+            time_budget: None,
+            max_views: 32,
+            min_inliers: defaults::VIEW_MIN_INLIERS,
+            min_inlier_ratio: defaults::VIEW_MIN_INLIER_RATIO,
+        }
+    }
+}
+
+impl ViewOptions {
+    pub(crate) fn validate(&self) -> Result<()> {
+        if !(0.0..=1.0).contains(&self.min_inlier_ratio) {
+            return Err(PipelineError::invalid(
+                "min_inlier_ratio",
+                format!("must be in [0, 1], got {}", self.min_inlier_ratio),
+            ));
+        }
+        if self.min_inliers < 8 {
+            return Err(PipelineError::invalid(
+                "min_inliers",
+                format!(
+                    "must be at least 8 (a fundamental matrix), got {}",
+                    self.min_inliers
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// Which image a view warps.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ViewImage {
+    /// Neither: the plain pair.
+    None,
+    /// Image A.
+    A,
+    /// Image B.
+    B,
+}
+
+/// A synthetic view: which image, and the ASIFT parameters of its warp.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewSpec {
+    /// The warped image.
+    pub image: ViewImage,
+    /// In-plane rotation ψ, radians.
+    pub rotation: f64,
+    /// Zoom s.
+    pub scale: f64,
+    /// Tilt t ≥ 1 (compression by t along `tilt_angle`).
+    pub tilt: f64,
+    /// Direction φ of the tilt, radians.
+    pub tilt_angle: f64,
+    /// The linear part, when the view was guided by ACs rather than parametrised.
+    pub guided: Option<[f64; 4]>,
+}
+
+impl ViewSpec {
+    /// The plain pair.
+    pub const PLAIN: Self = Self {
+        image: ViewImage::None,
+        rotation: 0.0,
+        scale: 1.0,
+        tilt: 1.0,
+        tilt_angle: 0.0,
+        guided: None,
+    };
+
+    fn param(image: ViewImage, rotation_deg: f64, scale: f64, tilt: f64, tilt_deg: f64) -> Self {
+        Self {
+            image,
+            rotation: rotation_deg.to_radians(),
+            scale,
+            tilt,
+            tilt_angle: tilt_deg.to_radians(),
+            guided: None,
+        }
+    }
+
+    /// The warp's linear part.
+    pub fn linear(&self) -> AffineWarp {
+        match self.guided {
+            Some(m) => AffineWarp { m, c: [0.0, 0.0] },
+            None => AffineWarp::linear(self.rotation, self.scale, self.tilt, self.tilt_angle),
+        }
+    }
+
+    /// A short label, e.g. `"B rot 90°"`, `"A zoom 0.5"`, `"A tilt 2 @45°"`, `"guided"`.
+    pub fn label(&self) -> String {
+        let image = match self.image {
+            ViewImage::None => return "plain".to_string(),
+            ViewImage::A => "A",
+            ViewImage::B => "B",
+        };
+        if self.guided.is_some() {
+            return format!("{image} guided");
+        }
+        let mut parts = vec![image.to_string()];
+        if self.rotation != 0.0 {
+            parts.push(format!("rot {:.0}°", self.rotation.to_degrees()));
+        }
+        if self.scale != 1.0 {
+            parts.push(format!("zoom {}", self.scale));
+        }
+        if self.tilt != 1.0 {
+            parts.push(format!(
+                "tilt {} @{:.1}°",
+                self.tilt,
+                self.tilt_angle.to_degrees()
+            ));
+        }
+        parts.join(" ")
+    }
+}
+
+/// What one view of the cascade gave.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewReport {
+    /// The view.
+    pub view: ViewSpec,
+    /// Its matches.
+    pub matches: usize,
+    /// Their inliers to the verifying F (0 when none was found).
+    pub inliers: usize,
+    /// Whether it passed verification.
+    pub verified: bool,
+    /// Wall time: warping, matching, ACs and verification.
+    pub time: Duration,
+}
+
+/// The parametrised views in the cascade's order (after the AC-guided one).
+pub fn candidate_views() -> Vec<ViewSpec> {
+    use ViewImage::{A, B};
+    let rotation = |r| ViewSpec::param(B, r, 1.0, 1.0, 0.0);
+    let zoom = |image, s| ViewSpec::param(image, 0.0, s, 1.0, 0.0);
+    let mut v: Vec<ViewSpec> = [90.0, 270.0, 180.0].map(rotation).to_vec();
+    v.extend([zoom(A, 0.5), zoom(B, 0.5)]);
+    v.extend([45.0, 315.0, 135.0, 225.0].map(rotation));
+    v.extend([zoom(A, 0.25), zoom(B, 0.25)]);
+    for (t, n) in [(2.0, 4), (4.0, 8)] {
+        for image in [A, B] {
+            for k in 0..n {
+                v.push(ViewSpec::param(
+                    image,
+                    0.0,
+                    1.0,
+                    t,
+                    180.0 * k as f64 / n as f64,
+                ));
+            }
+        }
+    }
+    v
+}
+
+/// The view that undoes the dominant affine map D of `inlier_acs` (their elementwise median):
+/// B warped by D⁻¹, or A by D when D shrinks (so that the view shrinks rather than enlarges).
+/// `None` with fewer than 8 ACs, a D close to the identity, or a degenerate D.
+pub fn guided_view(inlier_acs: &[[f64; 8]]) -> Option<ViewSpec> {
+    if inlier_acs.len() < 8 {
+        return None;
+    }
+    let median = |k: usize| {
+        let mut v: Vec<f64> = inlier_acs.iter().map(|r| r[k]).collect();
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let d = [median(4), median(5), median(6), median(7)];
+    let det = d[0] * d[3] - d[1] * d[2];
+    if !(det > 1e-3) || !det.is_finite() {
+        return None;
+    }
+    let off_identity = (d[0] - 1.0).abs() + d[1].abs() + d[2].abs() + (d[3] - 1.0).abs();
+    if off_identity < 0.3 {
+        return None;
+    }
+    let inv = [d[3] / det, -d[1] / det, -d[2] / det, d[0] / det];
+    let (image, m) = if det < 1.0 {
+        (ViewImage::A, d)
+    } else {
+        (ViewImage::B, inv)
+    };
+    Some(ViewSpec {
+        guided: Some(m),
+        ..ViewSpec {
+            image,
+            ..ViewSpec::PLAIN
+        }
+    })
+}
+
+/// The F-inliers of ACs (in any pixels): 0 without a model; the inlier mask.
+pub(crate) fn verify(corrs: &[[f64; 8]]) -> Result<(usize, Vec<bool>)> {
+    if corrs.len() < 8 {
+        return Ok((0, vec![false; corrs.len()]));
+    }
+    let data = Correspondences::from_ac_rows(corrs)?;
+    let mut o = EstimatorOptions::default();
+    o.ransac.threshold = defaults::FUNDAMENTAL_THRESHOLD;
+    match estimate_fundamental(&data, &o) {
+        Ok(e) => Ok((e.num_inliers, e.inliers)),
+        Err(RansacError::NoModel { .. }) => Ok((0, vec![false; corrs.len()])),
+        Err(e) => Err(e.into()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn modes_parse_and_bad_options_are_named() {
+        for m in [ViewMode::Off, ViewMode::Auto, ViewMode::Full] {
+            assert_eq!(m.name().parse::<ViewMode>().unwrap(), m);
+        }
+        let e = "some".parse::<ViewMode>().unwrap_err().to_string();
+        assert!(e.starts_with("views: unknown mode"), "{e}");
+        let o = ViewOptions {
+            min_inlier_ratio: 1.5,
+            ..Default::default()
+        };
+        assert!(
+            o.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("min_inlier_ratio")
+        );
+        let o = ViewOptions {
+            min_inliers: 3,
+            ..Default::default()
+        };
+        assert!(
+            o.validate()
+                .unwrap_err()
+                .to_string()
+                .contains("min_inliers")
+        );
+    }
+
+    #[test]
+    fn candidates_cover_rotation_zoom_and_tilt_without_repeats() {
+        let v = candidate_views();
+        assert_eq!(v.len(), 7 + 4 + 8 + 16);
+        let labels: std::collections::BTreeSet<String> = v.iter().map(|s| s.label()).collect();
+        assert_eq!(labels.len(), v.len());
+        assert!(labels.contains("B rot 90°") && labels.contains("A zoom 0.25"));
+        assert!(labels.contains("B tilt 4 @157.5°"));
+    }
+
+    #[test]
+    fn the_guided_view_undoes_the_dominant_map() {
+        // B is A rotated by 120° and zoomed by 2: D = 2 R(120°); B is warped by D⁻¹.
+        let (c, s) = (120f64.to_radians().cos(), 120f64.to_radians().sin());
+        let row = [0.0, 0.0, 0.0, 0.0, 2.0 * c, -2.0 * s, 2.0 * s, 2.0 * c];
+        let v = guided_view(&[row; 9]).unwrap();
+        assert_eq!(v.image, ViewImage::B);
+        let m = v.linear().m;
+        let d = [row[4], row[5], row[6], row[7]];
+        let prod = [
+            m[0] * d[0] + m[1] * d[2],
+            m[0] * d[1] + m[1] * d[3],
+            m[2] * d[0] + m[3] * d[2],
+            m[2] * d[1] + m[3] * d[3],
+        ];
+        for (p, want) in prod.iter().zip([1.0, 0.0, 0.0, 1.0]) {
+            assert!((p - want).abs() < 1e-12);
+        }
+        // A shrinking map warps A instead; near-identity and too few ACs give no view.
+        let half = [0.0, 0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.5];
+        assert_eq!(guided_view(&[half; 9]).unwrap().image, ViewImage::A);
+        let id = [0.0, 0.0, 0.0, 0.0, 1.05, 0.0, 0.0, 0.98];
+        assert!(guided_view(&[id; 9]).is_none() && guided_view(&[row; 7]).is_none());
+    }
+}
