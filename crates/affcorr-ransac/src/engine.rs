@@ -15,7 +15,7 @@
 
 use crate::error::{RansacError, Result};
 use crate::local_opt::{LoGraph, local_optimization};
-use crate::options::{LoKind, RansacOptions};
+use crate::options::{Cancel, LoKind, RansacOptions};
 use crate::problem::Problem;
 use crate::refine::LmOptions;
 use crate::sampler::Sampler;
@@ -165,6 +165,9 @@ where
             .max(options.min_iterations)
             .min(options.max_iterations)
     {
+        if options.cancel.as_ref().is_some_and(Cancel::is_cancelled) {
+            break;
+        }
         iterations += 1;
         sampler.sample(&mut rng, n, &mut sample);
         models.clear();
@@ -429,6 +432,24 @@ mod tests {
             refine_calls: Default::default(),
         };
         (line, truth)
+    }
+
+    #[test]
+    fn a_set_cancel_flag_stops_the_loop_before_the_next_iteration() {
+        let (line, _) = noisy_line(500, 0.7, 3);
+        let cancel = Cancel::new();
+        let opts = RansacOptions {
+            threshold: 0.3,
+            cancel: Some(cancel.clone()),
+            ..Default::default()
+        };
+        assert!(estimate(&line, &mut UniformSampler, &Msac::new(0.3), &opts).is_ok());
+        cancel.cancel();
+        let r = estimate(&line, &mut UniformSampler, &Msac::new(0.3), &opts);
+        assert!(
+            matches!(r, Err(RansacError::NoModel { iterations: 0 })),
+            "{r:?}"
+        );
     }
 
     #[test]

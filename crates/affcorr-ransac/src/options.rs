@@ -1,5 +1,38 @@
 //! Options of the robust estimator, with their defaults.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+/// A flag that stops an estimate early: set it from another thread (e.g. on Ctrl-C) and the
+/// loop ends after the current iteration, keeping the best model so far (then the usual local
+/// optimisation and refinement of that model). Clones share the flag; two flags are equal when
+/// they are the same flag.
+#[derive(Debug, Clone, Default)]
+pub struct Cancel(Arc<AtomicBool>);
+
+impl Cancel {
+    /// A flag not yet set.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Sets the flag.
+    pub fn cancel(&self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+
+    /// Whether the flag is set.
+    pub fn is_cancelled(&self) -> bool {
+        self.0.load(Ordering::Relaxed)
+    }
+}
+
+impl PartialEq for Cancel {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
 /// How local optimisation picks the data it refits on at each step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum LoKind {
@@ -48,6 +81,8 @@ pub struct RansacOptions {
     /// and sample kind it finds models as accurate as without it from a fraction of the
     /// residuals (tests/scoring_sprt.rs; run times in benches/results/ransac.md).
     pub sprt: bool,
+    /// Stops the loop early when set (see [`Cancel`]). Default `None`.
+    pub cancel: Option<Cancel>,
 }
 
 impl Default for RansacOptions {
@@ -64,6 +99,7 @@ impl Default for RansacOptions {
             lo_iterations: 10,
             final_refinement: true,
             sprt: true,
+            cancel: None,
         }
     }
 }
