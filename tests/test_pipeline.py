@@ -311,3 +311,17 @@ def test_docstring_example():
 
     result = doctest.testmod(affcorr.pipeline, optionflags=doctest.NORMALIZE_WHITESPACE)
     assert result.attempted > 0 and result.failed == 0
+
+
+def test_a_pair_without_matches_gives_no_model_rather_than_an_error():
+    """Too few matches for a minimal sample is a normal outcome of matching: like a RANSAC
+    that finds no model, a NaN model with no inliers, and the (few) matches."""
+    flat = np.full((240, 320), 0.5)
+    pipe = affcorr.Pipeline("xfeat", max_keypoints=256, threads=1, views="off")
+    for estimate in (pipe.homography, pipe.fundamental):
+        model, info, res = estimate(flat, flat, return_matches=True)
+        assert np.isnan(model).all() and info.num_inliers == 0
+        assert len(info.inliers) == len(res) < 3
+    K = np.array([[300.0, 0, 160], [0, 300, 120], [0, 0, 1]])
+    pose, info = pipe.relative_pose(flat, flat, K, K)
+    assert np.isnan(pose.R).all() and info.num_inliers == 0

@@ -22,8 +22,12 @@ use crate::ransac::{mat_result, nan_mat3, nan_pose, outcome, parse_options, pose
 use affcorr::pipeline::defaults::{self, Geometry};
 use affcorr::pipeline::views::ViewImage;
 use affcorr::pipeline::{
-    AffineRefineOptions, Estimated, GrayImage, ImageSource, Matcher, Matches, Pipeline,
-    PipelineError, RgbImage, ViewOptions, ViewReport, init_ort as init, model_file,
+    AffineRefineOptions, GrayImage, ImageSource, Matcher, Matches, Pipeline, PipelineError,
+    RgbImage, ViewOptions, ViewReport, init_ort as init, model_file,
+};
+use affcorr::ransac::{
+    Correspondences, Estimate, EstimatorOptions, RansacError, estimate_fundamental,
+    estimate_homography, estimate_relative_pose,
 };
 use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
@@ -346,23 +350,24 @@ impl PipelineRunner {
         }
         let (a, b, t) = self.images(py, image_a, image_b)?;
         let (a, b) = (a.source(), b.source());
+        let inner = &self.inner;
         let (model, m) = match intrinsics {
             Some((k1, k2)) => {
                 let (o, m) = py.detach(|| {
-                    let e = self.inner.relative_pose(a, b, &k1, &k2, &opts);
-                    estimated(e, nan_pose())
+                    estimate_or_empty(inner, a, b, &opts, nan_pose(), |d, o| {
+                        estimate_relative_pose(d, &k1, &k2, o)
+                    })
                 })?;
                 (pose_result(py, &o)?.into_pyobject(py)?.into_any(), m)
             }
             None => {
-                let (o, m) = py.detach(|| {
-                    let e = if geometry == Geometry::Homography {
-                        self.inner.homography(a, b, &opts)
-                    } else {
-                        self.inner.fundamental(a, b, &opts)
-                    };
-                    estimated(e, nan_mat3())
-                })?;
+                let estimator = if geometry == Geometry::Homography {
+                    estimate_homography
+                } else {
+                    estimate_fundamental
+                };
+                let (o, m) =
+                    py.detach(|| estimate_or_empty(inner, a, b, &opts, nan_mat3(), estimator))?;
                 (mat_result(py, &o)?.into_pyobject(py)?.into_any(), m)
             }
         };
@@ -488,17 +493,30 @@ impl PipelineRunner {
     }
 }
 
-/// The estimate as `affcorr.estimate_*` returns it (no model: NaN with no inliers) and the
-/// matches it came from; matching and option errors raise.
-fn estimated<M>(
-    r: Result<Estimated<M>, PipelineError>,
+/// The pair's matches and the estimate as `affcorr.estimate_*` returns it: no model (NaN,
+/// no inliers) also when the matches are fewer than a minimal sample, a normal outcome of
+/// matching; image, model and option errors raise.
+fn estimate_or_empty<M>(
+    pipeline: &Pipeline,
+    a: ImageSource<'_>,
+    b: ImageSource<'_>,
+    options: &EstimatorOptions,
     nan: M,
+    estimator: impl Fn(&Correspondences, &EstimatorOptions) -> Result<Estimate<M>, RansacError>,
 ) -> PyResult<(crate::ransac::Outcome<M>, Matches)> {
-    match r {
+    let matches = pipeline
+        .match_pair(a, b)
+        .map_err(|e| pipeline_error(e, None))?;
+    let n = matches.len();
+    match pipeline.estimate(matches.clone(), options, estimator) {
         Ok(e) => {
-            let n = e.matches.len();
             let o = outcome(Ok(e.estimate), n, nan).map_err(crate::arrays::value_error)?;
             Ok((o, e.matches))
+        }
+        Err(PipelineError::Ransac(e @ RansacError::NotEnoughData { .. })) => {
+            let o = outcome(Err(RansacError::NoModel { iterations: 0 }), n, nan)
+                .map_err(|_| crate::arrays::value_error(e))?;
+            Ok((o, matches))
         }
         Err(e) => Err(pipeline_error(e, None)),
     }
