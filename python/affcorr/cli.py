@@ -1,13 +1,18 @@
 """The `affcorr` command line.
 
     affcorr match A B -o acs.npz            images -> ACs (N, 8) with certainty
-    affcorr match --pairs list.txt -o DIR   many pairs (one "A B" per line), with a progress bar
+    affcorr match --pairs list.txt -o DIR   many pairs (one "A B" per line, # comments), with a
+                                            progress bar; DIR/<A>__<B>.npz and DIR/summary.json
     affcorr homography A B [--gt H.txt]     H, inliers, and the corner error against a ground truth
                        [-o h.json|h.npz]    ... saved at full precision (.npz: with the ACs)
     affcorr pose A B --K1 ... --K2 ...      relative pose (R, t) from calibrated images [-o ...]
-    affcorr show acs.npz -o matches.png     picture: matches (coloured by correctness with --gt)
-                                            and affine frames as ellipses
+    affcorr show acs.npz -o matches.png     picture: matches (coloured by correctness with --gt,
+                                            by the estimated model's inliers with --inliers)
+                                            and affine frames as ellipse pairs
     affcorr demo                            the whole pipeline on graffiti 1->3 (ground-truth H)
+
+Models print at full precision (every digit of the float64, as saved by -o). -o writes exactly
+the path given; it is checked writable before any work. -v / -q: more or less logging (stderr).
 
 Intrinsics are given as "fx,fy,cx,cy", as nine numbers "k11,...,k33", or as a text/.npy file
 holding a 3x3 matrix. A ground-truth homography is a text file of 3x3 numbers or an OpenCV XML
@@ -17,13 +22,42 @@ file (like graffiti's H1to3p.xml).
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import shlex
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from ._logging import configure_cli, logger
 from .metrics import corner_error
 from .pipeline import MATCHERS, PIPELINE_DEFAULTS
+
+
+class MissingExtra(RuntimeError):
+    """A command needs an optional dependency: the message names the extra to install."""
+
+
+def require(module: str, extra: str) -> None:
+    """Raises :class:`MissingExtra` (one line: what to install) unless ``module`` imports."""
+    from .data import importable
+
+    if not importable(module):
+        raise MissingExtra(f"this command needs {module}: pip install 'affcorr[{extra}]'")
+
+
+def format_matrix(name: str, m) -> str:
+    """``name = [[...], ...]`` with every float64 digit (numpy's shortest round-trip repr), so
+    that the printed numbers are the model itself."""
+    text = np.array2string(
+        np.asarray(m, dtype=np.float64),
+        floatmode="unique",
+        separator=", ",
+        max_line_width=160,
+        threshold=1000,
+    )
+    return f"{name} = {text}"
 
 
 def read_matrix(text: str, what: str) -> np.ndarray:
@@ -114,53 +148,141 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
 
 
 def _print_timings(timings: dict) -> None:
+    logger.info("timings:")
     for k, v in timings.items():
-        print(f"  {k:<12} {1e3 * v:8.1f} ms")
+        logger.info(f"  {k:<12} {1e3 * v:8.1f} ms")
 
 
 def _output_file(path: str | Path, flag: str) -> Path:
-    """Checks that `path` can be written before the work that produces it."""
+    """Checks, before the work that produces it, that exactly ``path`` can be written: not a
+    directory, its directory exists and is writable (and so is the file, if it exists)."""
     path = Path(path)
-    if not path.parent.is_dir():
+    if path.is_dir():
+        raise ValueError(f"{flag}: {str(path)!r} is a directory; give a file name")
+    parent = path.parent
+    if not parent.is_dir():
         raise ValueError(f"{flag}: the directory of {str(path)!r} does not exist")
+    if not os.access(parent, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
+        raise ValueError(f"{flag}: {str(path)!r} is not writable")
     return path
+
+
+def _output_dir(path: str | Path, flag: str) -> Path:
+    """An output folder, created if missing (its parent must exist), checked writable."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise ValueError(f"{flag}: {str(path)!r} exists and is not a directory")
+    if not path.exists():
+        if not path.parent.is_dir():
+            raise ValueError(f"{flag}: the directory of {str(path)!r} does not exist")
+        path.mkdir()
+    if not os.access(path, os.W_OK):
+        raise ValueError(f"{flag}: {str(path)!r} is not writable")
+    return path
+
+
+def save_npz(path: str | Path, **arrays) -> None:
+    """``np.savez`` to exactly ``path`` (numpy would append ``.npz`` to a name without it)."""
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+
+
+def read_pairs(path: str | Path) -> tuple[list[tuple[int, str, str]], list[tuple[int, str]]]:
+    """The pairs of a ``--pairs`` file: ``([(line, A, B)], [(line, why)])``. Blank lines and
+    ``#`` comments are skipped; paths with spaces can be quoted; a line that does not hold
+    exactly two paths is returned as bad, by its number."""
+    pairs, bad = [], []
+    for n, line in enumerate(Path(path).read_text().splitlines(), 1):
+        try:
+            fields = shlex.split(line, comments=True)
+        except ValueError as e:  # an unclosed quote
+            bad.append((n, f"cannot be parsed ({e})"))
+            continue
+        if not fields:
+            continue
+        if len(fields) != 2:
+            bad.append((n, f"holds {len(fields)} fields, not two image paths"))
+            continue
+        pairs.append((n, fields[0], fields[1]))
+    return pairs, bad
+
+
+def _pair_file_name(a: str, b: str, line: int, taken: set[str]) -> str:
+    """``<stem A>__<stem B>.npz``, with ``__line<N>`` where two pairs would share a name."""
+    name = f"{Path(a).stem}__{Path(b).stem}.npz"
+    if name in taken:
+        name = f"{Path(a).stem}__{Path(b).stem}__line{line}.npz"
+    taken.add(name)
+    return name
+
+
+def _match_pairs(args) -> int:
+    """``--pairs``: every pair is tried; a bad line or a failing pair is named by its line
+    number and the batch goes on; summary.json lists each line's outcome; the exit status is 2
+    when any line failed (the last stderr line says which)."""
+    pairs, bad = read_pairs(args.pairs)
+    out = _output_dir(args.output, "-o")
+    pipe = _pipeline(args) if pairs else None
+    from ._progress import progress
+
+    failed = [(n, why) for n, why in bad]
+    for n, why in bad:
+        logger.warning(f"--pairs line {n}: {why}")
+    summary = [{"line": n, "status": "bad line", "error": why} for n, why in bad]
+    taken: set[str] = set()
+    items = pairs if logger.getEffectiveLevel() > 20 else progress(pairs, "matching pairs", "pair")
+    for n, a, b in items:
+        entry = {"line": n, "image_a": a, "image_b": b}
+        try:
+            res = pipe.match_pair(a, b)
+        except (ValueError, OSError, RuntimeError) as e:
+            logger.warning(f"--pairs line {n} ({a} {b}): {e}")
+            failed.append((n, str(e)))
+            summary.append({**entry, "status": "failed", "error": str(e)})
+            continue
+        name = _pair_file_name(a, b, n, taken)
+        save_npz(out / name, corrs=res.corrs, certainty=res.certainty, image_a=a, image_b=b)
+        # Few or no matches is an outcome of matching, not a failure.
+        summary.append({**entry, "status": "ok", "file": name, "num_acs": len(res.corrs)})
+    summary.sort(key=lambda e: e["line"])
+    ok = sum(e["status"] == "ok" for e in summary)
+    (out / "summary.json").write_text(
+        json.dumps(
+            {"pairs_file": str(args.pairs), "ok": ok, "failed": len(failed), "pairs": summary},
+            indent=1,
+        )
+        + "\n"
+    )
+    print(f"{ok} of {len(summary)} pairs matched -> {out} (summary.json)")
+    if failed:
+        failed.sort()
+        lines = [n for n, _ in failed]
+        first_line, first_why = failed[0]
+        raise ValueError(
+            f"--pairs: {len(failed)} of {len(summary)} lines failed (lines {lines[:20]}); "
+            f"line {first_line}: {first_why}"
+        )
+    return 0
 
 
 def cmd_match(args) -> int:
     if args.pairs is not None:
-        lines = [ln.split() for ln in Path(args.pairs).read_text().splitlines() if ln.strip()]
-        bad = [i + 1 for i, ln in enumerate(lines) if len(ln) != 2]
-        if bad:
-            raise ValueError(f"--pairs: lines {bad[:5]} do not hold two image paths")
-        pipe = _pipeline(args)
-        out = Path(args.output)
-        out.mkdir(parents=True, exist_ok=True)
-        from ._progress import progress
-
-        for k, (a, b) in enumerate(progress(lines, desc="matching pairs", unit="pair")):
-            res = pipe.match_pair(a, b)
-            np.savez(
-                out / f"pair_{k:05d}.npz",
-                corrs=res.corrs,
-                certainty=res.certainty,
-                image_a=a,
-                image_b=b,
-            )
-        print(f"wrote {len(lines)} files to {out}")
-        return 0
+        if args.image_a is not None:
+            raise ValueError("give two images or --pairs FILE, not both")
+        return _match_pairs(args)
     if args.image_b is None:
         raise ValueError("give two images, or --pairs FILE")
-    _output_file(args.output, "-o")
+    out = _output_file(args.output, "-o")
     pipe = _pipeline(args)
     res = pipe.match_pair(args.image_a, args.image_b)
-    np.savez(
-        args.output,
+    save_npz(
+        out,
         corrs=res.corrs,
         certainty=res.certainty,
         image_a=args.image_a,
         image_b=args.image_b,
     )
-    print(f"{len(res.corrs)} ACs -> {args.output}")
+    print(f"{len(res.corrs)} ACs -> {out}")
     _print_timings(res.timings)
     return 0
 
@@ -175,24 +297,34 @@ def _estimate_output(path: str | None) -> Path | None:
     return out
 
 
+def _info_fields(info) -> dict:
+    """The estimation's counters (everything of RansacInfo but the mask)."""
+    return {
+        "num_inliers": int(info.num_inliers),
+        "num_iterations": int(info.num_iterations),
+        "score": float(info.score),
+        "lo_runs": int(info.lo_runs),
+        "refinements": int(info.refinements),
+        "residual_evaluations": int(info.residual_evaluations),
+        "sprt_rejections": int(info.sprt_rejections),
+    }
+
+
 def _save_estimate(out: Path | None, args, models: dict, info, res) -> None:
     """The model at full precision with the estimation's info: JSON (inlier indices), or .npz
     (with the ACs, their certainty and the inlier mask too)."""
     if out is None:
         return
     summary = {
+        "affcorr_version": _version(),
         "image_a": str(args.image_a),
         "image_b": str(args.image_b),
         "matcher": args.matcher or PIPELINE_DEFAULTS["matcher"],
         "threshold": args.threshold,
         "num_acs": len(res.corrs),
-        "num_inliers": int(info.num_inliers),
-        "num_iterations": int(info.num_iterations),
-        "score": float(info.score),
+        **_info_fields(info),
     }
     if out.suffix == ".json":
-        import json
-
         payload = {
             **summary,
             **{k: np.asarray(v).tolist() for k, v in models.items()},
@@ -200,7 +332,7 @@ def _save_estimate(out: Path | None, args, models: dict, info, res) -> None:
         }
         out.write_text(json.dumps(payload, indent=1) + "\n")
     else:
-        np.savez(
+        save_npz(
             out,
             corrs=res.corrs,
             certainty=res.certainty,
@@ -208,7 +340,7 @@ def _save_estimate(out: Path | None, args, models: dict, info, res) -> None:
             **models,
             **summary,
         )
-    print(f"-> {out}")
+    logger.info(f"-> {out}")
 
 
 def cmd_homography(args) -> int:
@@ -222,8 +354,7 @@ def cmd_homography(args) -> int:
     _save_estimate(out, args, {"H": H}, info, res)
     n = len(info.inliers)
     print(f"inliers: {int(info.inliers.sum())} / {n}")
-    with np.printoptions(precision=6, suppress=True):
-        print(f"H =\n{H}")
+    print(format_matrix("H", H))
     if H_gt is not None:
         from . import read_gray_image
 
@@ -242,16 +373,49 @@ def cmd_pose(args) -> int:
     models = {"R": pose.R, "t": pose.t, "E": pose.E, "F": pose.F}
     _save_estimate(out, args, models, info, res)
     print(f"inliers: {int(info.inliers.sum())} / {len(info.inliers)}")
-    with np.printoptions(precision=6, suppress=True):
-        print(f"R =\n{pose.R}\nt = {pose.t}")
+    print(format_matrix("R", pose.R))
+    print(format_matrix("t", pose.t))
     return 0
 
 
+def _version() -> str:
+    from ._native import __version__
+
+    return __version__
+
+
+def model_residuals(data, threshold: float) -> tuple[str, np.ndarray, np.ndarray]:
+    """For ``affcorr show --inliers``: (what, residuals (N,) px, inliers (N,) bool) of the model
+    saved in ``data`` (an .npz of ``affcorr homography -o``: H and its transfer errors; of
+    ``affcorr pose -o``: F and its Sampson distances), or of a homography estimated here from the
+    ACs (``affcorr match``'s .npz) at ``threshold``."""
+    from . import estimate_homography, sampson_point
+    from .metrics import transfer
+
+    corrs = np.asarray(data["corrs"], dtype=np.float64)
+    saved = data["inliers"].astype(bool) if "inliers" in data else None
+    if "F" in data and "H" not in data:
+        # sampson_point is the squared distance (px²); the residual is its root (px).
+        r = np.sqrt(np.abs(sampson_point(data["F"], corrs))) if len(corrs) else np.zeros(0)
+        what = "the saved F (Sampson distance)"
+    else:
+        if "H" in data:
+            H, what = np.asarray(data["H"], dtype=np.float64), "the saved H (transfer error)"
+        else:
+            H, info = estimate_homography(corrs, threshold=threshold)
+            saved = info.inliers
+            what = f"H estimated at {threshold:g} px (transfer error)"
+        r = np.linalg.norm(transfer(H, corrs[:, :2]) - corrs[:, 2:4], axis=1)
+    inliers = saved if saved is not None else r < threshold
+    return what, r, inliers
+
+
 def cmd_show(args) -> int:
+    require("matplotlib", "plot")
     from .plot import draw_matches
 
     H = read_matrix(args.gt, "--gt") if args.gt is not None else None
-    _output_file(args.output, "-o")
+    out = _output_file(args.output, "-o")
     try:
         data = np.load(args.acs)
     except (OSError, ValueError, EOFError) as e:
@@ -266,10 +430,27 @@ def cmd_show(args) -> int:
 
     a, b = read_gray_image(str(data["image_a"])), read_gray_image(str(data["image_b"]))
     certainty = data["certainty"] if "certainty" in data else None
+    model = None
+    if args.inliers:
+        threshold = (
+            args.threshold
+            if args.threshold is not None
+            else PIPELINE_DEFAULTS["homography_threshold"]
+        )
+        what, residuals, inliers = model_residuals(data, threshold)
+        model = {"what": what, "residuals": residuals, "inliers": inliers}
+        print(f"inliers of {what}: {int(inliers.sum())} / {len(inliers)}")
     draw_matches(
-        a, b, data["corrs"], args.output, H=H, certainty=certainty, threshold=args.threshold
+        a,
+        b,
+        data["corrs"],
+        out,
+        H=H,
+        certainty=certainty,
+        threshold=args.threshold if args.threshold is not None else 3.0,
+        model=model,
     )
-    print(f"picture: {args.output}")
+    print(f"picture: {out}")
     return 0
 
 
@@ -286,17 +467,35 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _add_verbosity(p: argparse.ArgumentParser, top: bool) -> None:
+    # On the top parser and on each command, so that `affcorr -v match ...` and
+    # `affcorr match ... -v` both work (a command's flags must not reset the top's).
+    d = 0 if top else argparse.SUPPRESS
+    p.add_argument(
+        "-v", "--verbose", action="count", default=d, help="more logging (stderr): -v debug"
+    )
+    p.add_argument(
+        "-q", "--quiet", action="count", default=d, help="less: warnings and errors only"
+    )
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="affcorr", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
+    parser.add_argument("--version", action="version", version=f"affcorr {_version()}")
+    _add_verbosity(parser, top=True)
     sub = parser.add_subparsers(dest="command", required=True)
 
     p = sub.add_parser("match", help="images -> ACs (.npz)")
     p.add_argument("image_a", nargs="?")
     p.add_argument("image_b", nargs="?")
-    p.add_argument("--pairs", help="text file, one 'A B' pair per line (output is a folder)")
-    p.add_argument("-o", "--output", required=True)
+    p.add_argument(
+        "--pairs",
+        help="text file, one 'A B' pair per line, '#' comments (output: a folder with "
+        "<A>__<B>.npz per pair and summary.json)",
+    )
+    p.add_argument("-o", "--output", required=True, help="the .npz to write (exactly this path)")
     _add_pipeline_args(p)
     p.set_defaults(run=cmd_match)
 
@@ -335,9 +534,21 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("show", help="draw the ACs of an .npz written by `affcorr match`")
     p.add_argument("acs")
-    p.add_argument("-o", "--output", default="matches.png")
+    p.add_argument("-o", "--output", default="matches.png", help="picture (.png, .pdf, .svg)")
     p.add_argument("--gt", help="ground-truth H: colour matches by correctness")
-    p.add_argument("--threshold", type=float, default=3.0, help="correct within (px)")
+    p.add_argument(
+        "--inliers",
+        action="store_true",
+        help="colour by the inliers of the estimated model (the H or F saved by "
+        "`affcorr homography/pose -o x.npz`, else H estimated from the ACs) and plot residuals",
+    )
+    p.add_argument(
+        "--threshold",
+        type=float,
+        default=None,
+        help="correct within (px, default 3) for --gt; inlier threshold for --inliers "
+        f"(default {PIPELINE_DEFAULTS['homography_threshold']})",
+    )
     p.set_defaults(run=cmd_show)
 
     p = sub.add_parser("demo", help="the pipeline on graffiti 1->3 with its ground-truth H")
@@ -351,11 +562,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--matcher", choices=MATCHERS, default=PIPELINE_DEFAULTS["matcher"])
     p.add_argument("--max-keypoints", type=int, default=PIPELINE_DEFAULTS["max_keypoints"])
     p.set_defaults(run=cmd_demo)
+    for p in sub.choices.values():
+        _add_verbosity(p, top=False)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
+    configure_cli(args.verbose - args.quiet)
     try:
         return args.run(args)
     except (ValueError, OSError, RuntimeError) as e:

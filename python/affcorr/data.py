@@ -48,12 +48,21 @@ def graffiti_files() -> tuple[Path, Path, np.ndarray]:
     return d / "graf1.png", d / "graf3.png", read_opencv_matrix(d / "H1to3p.xml")
 
 
+def importable(module: str) -> bool:
+    """Whether ``module`` imports (an optional dependency: installed and working)."""
+    import importlib
+
+    try:
+        importlib.import_module(module)
+    except ImportError:
+        return False
+    return True
+
+
 def picture_note() -> str | None:
     """None when matplotlib is installed; else the one line the demos print instead of a
     picture."""
-    import importlib.util
-
-    if importlib.util.find_spec("matplotlib") is not None:
+    if importable("matplotlib"):
         return None
     return "picture skipped: it needs matplotlib: pip install 'affcorr[plot]'"
 
