@@ -15,6 +15,9 @@ two images and matched points into ACs; ``Pipeline`` runs the whole chain: two i
 matches (mutual nearest neighbours, XFeat* or LighterGlue) → ACs → homography or relative pose.
 """
 
+from . import opencv, solvers  # affcorr.solvers, as the README names it; affcorr.opencv
+from ._docs import document as _document
+from ._logging import logger as _logger  # noqa: F401  (the "affcorr" logger, silent)
 from ._native import (
     __version__,
     affine_from_homography,
@@ -115,4 +118,9 @@ __all__ = [
     "sampson_point",
     "sampson_point_grad",
     "synthesize_affine",
+    "solvers",
+    "opencv",
 ]
+
+# The native functions above carry their text from _native.pyi (affcorr._docs).
+_document(globals(), __all__)

@@ -32,6 +32,7 @@ Example:
 True
 """
 
+from ._docs import document as _document
 from ._native import (
     essential_2ac,
     essential_5pt,
@@ -63,3 +64,5 @@ __all__ = [
     "homography_ac_lsq",
     "homography_lsq",
 ]
+
+_document(globals(), __all__)
