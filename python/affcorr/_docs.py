@@ -53,6 +53,8 @@ def documented(name: str) -> Callable[..., Any]:
     wrapper.__doc__ = stub_docstrings().get(name, native.__doc__)
     wrapper.__module__ = "affcorr"
     wrapper.__signature__ = inspect.signature(native)  # type: ignore[attr-defined]
+    # No __wrapped__: documentation tools that unwrap (pdoc) would read the native's empty text.
+    del wrapper.__wrapped__
     _wrappers[name] = wrapper
     return wrapper
 
