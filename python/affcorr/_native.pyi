@@ -8,7 +8,7 @@ Bad inputs raise ``ValueError`` naming the argument.
 
 import os
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, final
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -51,9 +51,10 @@ def laf_to_affine(laf1: ArrayLike, laf2: ArrayLike) -> NDArray[np.float64]:
     x1, x2 are the LAF centres and A = L2 L1^-1."""
 
 def affine_to_laf(
-    corrs: ArrayLike, radius: float = 1.0
+    corrs: ArrayLike, radius: float | None = None
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """ACs (N, 8) to kornia LAF pairs (1, N, 2, 3): L1 = radius·I at x1, L2 = radius·A at x2."""
+    """ACs (N, 8) to kornia LAF pairs (1, N, 2, 3): L1 = radius·I at x1, L2 = radius·A at x2
+    (radius None: 1.0)."""
 
 def essential_from_pose(R: ArrayLike, t: ArrayLike) -> NDArray[np.float64]:
     """E = [t]x R (3, 3) for the motion X2 = R X1 + t."""
@@ -221,6 +222,7 @@ def essential_lsq(
 
 # --- shape network runner (docs/design.md §6; wrapped by affcorr.shape) ---------------------------
 
+@final
 class ShapeRunner:
     """The shape network loaded through ONNX Runtime (use ``affcorr.ShapeEstimator``).
 
@@ -231,14 +233,14 @@ class ShapeRunner:
     Raises FileNotFoundError (no such model), RuntimeError (ONNX Runtime or the model),
     ValueError (threads < 1, batch_size < 1)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         model_path: str | os.PathLike[str],
         *,
         ort_library: str | os.PathLike[str] | None = None,
         threads: int | None = None,
         batch_size: int = 512,
-    ) -> None: ...
+    ) -> ShapeRunner: ...
     def predict(
         self, patches_a: ArrayLike, patches_b: ArrayLike, return_logits: bool = False
     ) -> dict[str, np.ndarray]:
@@ -295,6 +297,7 @@ def refine_affine(
     min_zncc: float,
     move_points: bool,
     try_identity: bool,
+    max_shift_std: float,
 ) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
     """Affine Lucas-Kanade refinement of ACs (wrapped by affcorr.refine_affine): (corrs (N, 8),
     refined (N,) bool, zncc (N,))."""
@@ -312,6 +315,7 @@ PIPELINE_MATCHER_MODELS: dict[str, list[str]]
 #: Model file names in a models directory, by role.
 PIPELINE_MODEL_FILES: dict[str, str]
 
+@final
 class PipelineRunner:
     """Matcher (XFeat backbone + MNN / XFeat* refinement / LighterGlue, or a dense-warp-v1
     model with DKM's balanced sampling) and shape network in Rust (use ``affcorr.Pipeline``).
@@ -319,8 +323,8 @@ class PipelineRunner:
     Raises ValueError (unknown matcher, option < 1, descriptor sizes that disagree),
     FileNotFoundError (no such model), RuntimeError (contract violation, ONNX Runtime)."""
 
-    def __init__(
-        self,
+    def __new__(
+        cls,
         *,
         matcher: str,
         shape_model: str | os.PathLike[str],
@@ -333,9 +337,9 @@ class PipelineRunner:
         max_matches: int | None = None,
         max_side: int | None = None,
         threads: int | None = None,
-        seed: int = 0,
-        refine_affine: bool = True,
-    ) -> None: ...
+        seed: int = ...,
+        refine_affine: bool = ...,
+    ) -> PipelineRunner: ...
     def estimate(
         self,
         geometry: str,
