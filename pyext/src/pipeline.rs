@@ -15,9 +15,11 @@
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use crate::arrays::{flatten, to_numpy};
+use crate::arrays::{flatten, opt_int_option, to_numpy, to_usize};
+use crate::errors::rewrap;
 use crate::errors::{image_error, pipeline_error, runner_error};
 use crate::image::gray_image;
+use crate::interrupt::interruptible;
 use crate::ransac::{mat_result, nan_mat3, nan_pose, outcome, parse_options, pose_result};
 use affcorr::pipeline::defaults::{self, Geometry};
 use affcorr::pipeline::views::ViewImage;
@@ -29,6 +31,7 @@ use affcorr::ransac::{
     Correspondences, Estimate, EstimatorOptions, RansacError, estimate_fundamental,
     estimate_homography, estimate_relative_pose,
 };
+use affcorr::runner::contract::MAX_THREADS;
 use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -201,7 +204,7 @@ impl PipelineRunner {
     #[pyo3(signature = (
         *, matcher, shape_model, backbone_model = None, refine_model = None,
         lighterglue_model = None, dense_model = None, ort_library = None, max_keypoints = None,
-        max_matches = None, max_side = None, threads = None, seed = defaults::SEED,
+        max_matches = None, max_side = None, threads = None, seed = None,
         refine_affine = defaults::REFINE_AFFINE, views = None, view_budget = None,
         max_views = None
     ))]
@@ -215,16 +218,31 @@ impl PipelineRunner {
         lighterglue_model: Option<PathBuf>,
         dense_model: Option<PathBuf>,
         ort_library: Option<PathBuf>,
-        max_keypoints: Option<usize>,
-        max_matches: Option<usize>,
-        max_side: Option<usize>,
-        threads: Option<usize>,
-        seed: u64,
+        max_keypoints: Option<&Bound<'_, PyAny>>,
+        max_matches: Option<&Bound<'_, PyAny>>,
+        max_side: Option<&Bound<'_, PyAny>>,
+        threads: Option<&Bound<'_, PyAny>>,
+        seed: Option<&Bound<'_, PyAny>>,
         refine_affine: bool,
         views: Option<&str>,
         view_budget: Option<f64>,
-        max_views: Option<usize>,
+        max_views: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
+        // Integer options: Python or numpy ints, each bounded and named in its errors.
+        let positive = |v, name, max: u64| opt_int_option(v, name, "a positive int", 1, max);
+        let max_keypoints = positive(max_keypoints, "max_keypoints", MAX_KEYPOINTS)?;
+        let max_matches = positive(max_matches, "max_matches", MAX_MATCHES)?;
+        let max_side = positive(max_side, "max_side", MAX_SIDE)?;
+        let threads = opt_int_option(
+            threads,
+            "threads",
+            "a positive int or None",
+            1,
+            MAX_THREADS as u64,
+        )?;
+        let seed = opt_int_option(seed, "seed", "a non-negative int", 0, u64::MAX)?
+            .unwrap_or(defaults::SEED);
+        let max_views = positive(max_views, "max_views", MAX_VIEWS)?;
         let matcher: Matcher = matcher.parse().map_err(|e| runner_error(e, None))?;
         let mut b = Pipeline::builder()
             .matcher(matcher)
@@ -249,16 +267,16 @@ impl PipelineRunner {
             b = b.lighterglue_model(p);
         }
         if let Some(n) = max_keypoints {
-            b = b.max_keypoints(n);
+            b = b.max_keypoints(to_usize(n));
         }
         if let Some(n) = max_matches {
-            b = b.max_matches(n);
+            b = b.max_matches(to_usize(n));
         }
         if let Some(n) = max_side {
-            b = b.max_side(n);
+            b = b.max_side(to_usize(n));
         }
         if let Some(n) = threads {
-            b = b.threads(n);
+            b = b.threads(to_usize(n));
         }
         b = b.affine_refinement(refine_affine.then(AffineRefineOptions::default));
         let mut view_options = ViewOptions::default();
@@ -274,7 +292,7 @@ impl PipelineRunner {
             view_options.time_budget = Some(Duration::from_secs_f64(seconds));
         }
         if let Some(n) = max_views {
-            view_options.max_views = n;
+            view_options.max_views = to_usize(n);
         }
         b = b.views(view_options);
         py.detach(|| {
@@ -295,8 +313,7 @@ impl PipelineRunner {
         let colour = self.inner.matcher() == Matcher::Dense;
         let (a, ta) = image_arg(py, image_a, "image_a", colour)?;
         let (b, tb) = image_arg(py, image_b, "image_b", colour)?;
-        let m = py
-            .detach(|| self.inner.match_pair(a.source(), b.source()))
+        let m = interruptible(py, |_| self.inner.match_pair(a.source(), b.source()))?
             .map_err(|e| pipeline_error(e, None))?;
         match_tuple(py, m, ta + tb)
     }
@@ -353,11 +370,12 @@ impl PipelineRunner {
         let inner = &self.inner;
         let (model, m) = match intrinsics {
             Some((k1, k2)) => {
-                let (o, m) = py.detach(|| {
+                let (o, m) = interruptible(py, |cancel| {
+                    opts.ransac.cancel = Some(cancel.clone());
                     estimate_or_empty(inner, a, b, &opts, nan_pose(), |d, o| {
                         estimate_relative_pose(d, &k1, &k2, o)
                     })
-                })?;
+                })??;
                 (pose_result(py, &o)?.into_pyobject(py)?.into_any(), m)
             }
             None => {
@@ -366,8 +384,10 @@ impl PipelineRunner {
                 } else {
                     estimate_fundamental
                 };
-                let (o, m) =
-                    py.detach(|| estimate_or_empty(inner, a, b, &opts, nan_mat3(), estimator))?;
+                let (o, m) = interruptible(py, |cancel| {
+                    opts.ransac.cancel = Some(cancel.clone());
+                    estimate_or_empty(inner, a, b, &opts, nan_mat3(), estimator)
+                })??;
                 (mat_result(py, &o)?.into_pyobject(py)?.into_any(), m)
             }
         };
@@ -375,8 +395,10 @@ impl PipelineRunner {
     }
 
     /// ACs of many pairs (a sequence of `(image_a, image_b)`), in parallel on single-threaded
-    /// copies of the models (`Pipeline::match_pairs`); the first failing pair raises, naming
-    /// its index.
+    /// copies of the models (`Pipeline::match_pairs`). Each pair gets its match tuple, or the
+    /// exception `match_pair` would have raised for it (its message prefixed `pairs[i]: `), in
+    /// its place: one unreadable image costs its own pair only. A malformed `pairs` (not a
+    /// sequence, an item that is not a pair) raises.
     fn match_pairs<'py>(
         &self,
         py: Python<'py>,
@@ -384,9 +406,15 @@ impl PipelineRunner {
     ) -> PyResult<Bound<'py, PyList>> {
         let items: Vec<Bound<'py, PyAny>> = pairs
             .try_iter()
-            .map_err(|_| PyValueError::new_err("pairs must be a sequence of (image_a, image_b)"))?
+            .map_err(|e| {
+                rewrap(e, |_| {
+                    PyValueError::new_err("pairs must be a sequence of (image_a, image_b)")
+                })
+            })?
             .collect::<PyResult<_>>()?;
-        let mut args = Vec::with_capacity(items.len());
+        let colour = self.inner.matcher() == Matcher::Dense;
+        let mut args: Vec<PyResult<(ImageArg, ImageArg, Duration)>> =
+            Vec::with_capacity(items.len());
         for (i, item) in items.iter().enumerate() {
             let pair = item
                 .cast::<PyTuple>()
@@ -402,20 +430,39 @@ impl PipelineRunner {
                     "pairs[{i}] must be a pair (image_a, image_b)"
                 )));
             };
-            let prefix = |e: PyErr| prefix_error(py, i, e);
-            let colour = self.inner.matcher() == Matcher::Dense;
-            let (a, ta) = image_arg(py, &a, "image_a", colour).map_err(prefix)?;
-            let (b, tb) = image_arg(py, &b, "image_b", colour).map_err(prefix)?;
-            args.push((a, b, ta + tb));
+            let arg = image_arg(py, &a, "image_a", colour).and_then(|(a, ta)| {
+                image_arg(py, &b, "image_b", colour).map(|(b, tb)| (a, b, ta + tb))
+            });
+            args.push(arg.map_err(|e| prefix_error(py, i, e)));
         }
-        let results: Vec<_> = py.detach(|| {
+        let runnable: Vec<(usize, ImageSource<'_>, ImageSource<'_>)> = args
+            .iter()
+            .enumerate()
+            .filter_map(|(i, a)| a.as_ref().ok().map(|(a, b, _)| (i, a.source(), b.source())))
+            .collect();
+        let results = interruptible(py, |cancel| {
             self.inner
-                .match_pairs(args.iter().map(|(a, b, _)| (a.source(), b.source())))
-        });
-        let mut out = Vec::with_capacity(results.len());
-        for (i, (r, (_, _, t))) in results.into_iter().zip(&args).enumerate() {
-            let m = r.map_err(|e| prefix_error(py, i, pipeline_error(e, None)))?;
-            out.push(match_tuple(py, m, *t)?);
+                .match_pairs_until(runnable.iter().map(|&(_, a, b)| (a, b)), cancel)
+        })?;
+        let mut matched: Vec<Option<Result<Matches, PipelineError>>> =
+            (0..args.len()).map(|_| None).collect();
+        for (&(i, _, _), r) in runnable.iter().zip(results) {
+            matched[i] = Some(r.expect("an uncancelled batch matches every pair"));
+        }
+        let mut out = Vec::with_capacity(args.len());
+        for (i, (arg, r)) in args.into_iter().zip(matched).enumerate() {
+            let item = match (arg, r) {
+                (Err(e), _) => e.into_value(py).into_bound(py).into_any(),
+                (Ok((_, _, t)), Some(Ok(m))) => {
+                    match_tuple(py, m, t)?.into_pyobject(py)?.into_any()
+                }
+                (Ok(_), Some(Err(e))) => prefix_error(py, i, pipeline_error(e, None))
+                    .into_value(py)
+                    .into_bound(py)
+                    .into_any(),
+                (Ok(_), None) => unreachable!("every readable pair is matched"),
+            };
+            out.push(item);
         }
         PyList::new(py, out)
     }
@@ -513,17 +560,36 @@ fn estimate_or_empty<M>(
             let o = outcome(Ok(e.estimate), n, nan).map_err(crate::arrays::value_error)?;
             Ok((o, e.matches))
         }
-        Err(PipelineError::Ransac(e @ RansacError::NotEnoughData { .. })) => {
+        // No model, or fewer matches than a minimal sample: NaN with no inliers.
+        Err(PipelineError::Ransac(RansacError::NoModel { iterations })) => {
+            let o = outcome(Err(RansacError::NoModel { iterations }), n, nan)
+                .map_err(crate::arrays::value_error)?;
+            Ok((o, matches))
+        }
+        Err(PipelineError::Ransac(RansacError::NotEnoughData { .. })) => {
             let o = outcome(Err(RansacError::NoModel { iterations: 0 }), n, nan)
-                .map_err(|_| crate::arrays::value_error(e))?;
+                .map_err(crate::arrays::value_error)?;
             Ok((o, matches))
         }
         Err(e) => Err(pipeline_error(e, None)),
     }
 }
 
-/// The same exception type, its message prefixed with `pairs[i]: `.
+/// The most keypoints per image (each costs descriptor memory and matching time).
+const MAX_KEYPOINTS: u64 = 1 << 20;
+/// The most matches kept (a dense matcher draws this many).
+const MAX_MATCHES: u64 = 1 << 24;
+/// The longest working side in pixels.
+const MAX_SIDE: u64 = 1 << 20;
+/// The most views the cascade may try.
+const MAX_VIEWS: u64 = 1 << 10;
+
+/// The same exception type, its message prefixed with `pairs[i]: ` (a KeyboardInterrupt and
+/// the like pass unchanged).
 fn prefix_error(py: Python<'_>, i: usize, e: PyErr) -> PyErr {
+    if crate::errors::passes_through(py, &e) {
+        return e;
+    }
     let msg = format!("pairs[{i}]: {}", e.value(py));
     let ty = e.get_type(py);
     PyErr::from_type(ty, msg)
