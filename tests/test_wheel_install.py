@@ -69,7 +69,7 @@ def test_version_and_api_from_the_wheel(clean_venv, tmp_path):
     r = run(clean_venv, "--version", cwd=tmp_path)
     assert r.returncode == 0 and r.stdout.startswith("affcorr "), r.stderr
     code = (
-        "import affcorr; assert affcorr.solvers.homography_4pt.__doc__; "
+        "import affcorr, affcorr.data; assert affcorr.solvers.homography_4pt.__doc__; "
         "assert affcorr.decompose_affine.__doc__; print(affcorr.data.data_dir())"
     )
     r = subprocess.run(
