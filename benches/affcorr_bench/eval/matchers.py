@@ -445,14 +445,17 @@ def _pipeline(max_keypoints: int):
 
 @functools.cache
 def shape_model_tag() -> str:
-    """The bundled shape network's identity (a hash of the ONNX file) and the refinement
-    ("-lk": affcorr's default affine Lucas-Kanade, which moves x2 too): part of every cache key
-    of ACs with affcorr's A, so a new model or default never reuses the old one's ACs."""
+    """The bundled shape network's identity (a hash of the ONNX file), the refinement ("-lk":
+    affcorr's default affine Lucas-Kanade, which moves x2 too) and the pipeline's view cascade
+    ("-views-auto"): part of every cache key of ACs with affcorr's A, so a new model or
+    default never reuses the old one's ACs."""
     import hashlib
 
+    from affcorr.pipeline import PIPELINE_DEFAULTS
     from affcorr.shape import bundled_shape_model
 
-    return hashlib.sha1(bundled_shape_model().read_bytes()).hexdigest()[:10] + "-lk"
+    digest = hashlib.sha1(bundled_shape_model().read_bytes()).hexdigest()[:10]
+    return f"{digest}-lk-views-{PIPELINE_DEFAULTS['views']}"
 
 
 @functools.cache
@@ -464,7 +467,8 @@ def shape_estimator():
 
 
 def affcorr_pipeline(img1: np.ndarray, img2: np.ndarray, max_keypoints: int = 2048) -> Matches:
-    """affcorr.Pipeline: XFeat + LighterGlue matches (ONNX, Rust) -> shape network -> ACs."""
+    """affcorr.Pipeline with its defaults (the view cascade included): XFeat + LighterGlue
+    matches (ONNX, Rust) -> shape network -> ACs."""
     t0 = time.perf_counter()
     res = _pipeline(max_keypoints).match_pair(_rgb_u8(img1), _rgb_u8(img2))
     c = res.corrs
