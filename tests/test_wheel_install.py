@@ -39,6 +39,12 @@ def clean_venv(tmp_path_factory) -> Path:
         build = ["flock", str(lock), *build]
     subprocess.run(build, cwd=ROOT, check=True, timeout=1500)
     [wheel] = wheels.glob("affcorr-*.whl")
+    import zipfile
+
+    names = zipfile.ZipFile(wheel).namelist()
+    assert "affcorr/sample_data/graffiti/graf1.png" in names  # the demo's data
+    assert any(n.endswith(".dist-info/licenses/LICENSE") for n in names)
+    assert "affcorr/_native.pyi" in names and "affcorr/py.typed" in names
     env_dir = tmp / "venv"
     venv.EnvBuilder(with_pip=True, system_site_packages=False).create(env_dir)
     pip = [str(env_dir / "bin" / "python"), "-m", "pip", "install", "-q"]
