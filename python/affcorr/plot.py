@@ -82,6 +82,7 @@ def draw_matches(
     rng = np.random.default_rng(seed)
     n = len(corrs)
     order = rng.permutation(n)
+    ellipse_order = order
     if model is not None:
         inl = np.asarray(model["inliers"], dtype=bool)
         res = np.asarray(model["residuals"], dtype=np.float64)
@@ -93,7 +94,8 @@ def draw_matches(
         if H is not None:
             ok = correct_mask(corrs, np.asarray(H, dtype=np.float64), threshold)
             label += f"; {ok.sum()} correct within {threshold:g} px of the ground truth"
-        order = np.concatenate([order[inl[order]], order[~inl[order]]])
+        # lines: a random sample of all; ellipse pairs: the inliers' first
+        ellipse_order = np.concatenate([order[inl[order]], order[~inl[order]]])
         finite = res[np.isfinite(res)]
         top = max(float(np.percentile(finite, 99)), 1e-3) if len(finite) else 1.0
         bins = np.linspace(0, top, 60)
@@ -126,7 +128,7 @@ def draw_matches(
     if corrs.shape[1] == 8:
         t = np.linspace(0, 2 * np.pi, 40)
         circle = radius * np.stack([np.cos(t), np.sin(t)])
-        for i in order[:max_ellipses]:
+        for i in ellipse_order[:max_ellipses]:
             A = corrs[i, 4:].reshape(2, 2)
             e = A @ circle
             ax.plot(corrs[i, 0] + circle[0], corrs[i, 1] + circle[1], color=colours[i], lw=1.0)
