@@ -337,7 +337,7 @@ class PipelineRunner:
         max_matches: int | None = None,
         max_side: int | None = None,
         threads: int | None = None,
-        seed: int = ...,
+        seed: int | None = None,
         refine_affine: bool = ...,
     ) -> PipelineRunner: ...
     def estimate(
