@@ -68,6 +68,16 @@ def test_points_from_opencv_forms():
         points(np.zeros((3, 2, 2)), "x1")
 
 
+def test_as_xy_reshapes_opencv_forms_and_leaves_the_rest():
+    from affcorr._images import as_xy
+
+    pts = np.arange(6.0).reshape(3, 1, 2)
+    np.testing.assert_array_equal(as_xy(pts), pts[:, 0])
+    np.testing.assert_array_equal(as_xy([cv2.KeyPoint(1.0, 2.0, 3.0)]), [[1.0, 2.0]])
+    bad = np.zeros((3, 3))
+    assert as_xy(bad) is bad  # the readers keep their own messages
+
+
 def test_keypoint_frames_units():
     xy, size, angle = keypoint_frames([cv2.KeyPoint(5.0, 6.0, 8.0, 90.0), cv2.KeyPoint(1, 2, 3)])
     np.testing.assert_array_equal(xy, [[5, 6], [1, 2]])

@@ -55,3 +55,13 @@ def as_rgb(image: Any, channel_order: str = "rgb") -> Any:
             return np.ascontiguousarray(a[..., [2, 1, 0, 3]])
         return a
     return image
+
+
+def as_xy(points: Any) -> Any:
+    """OpenCV's point forms as ``(N, 2)``: ``(N, 1, 2)`` arrays and ``cv2.KeyPoint`` lists (their
+    ``pt``); anything else is returned unchanged, for the readers' own checks and messages."""
+    if isinstance(points, (list, tuple)) and len(points) and hasattr(points[0], "pt"):
+        return np.array([k.pt for k in points], dtype=np.float64).reshape(-1, 2)
+    if isinstance(points, np.ndarray) and points.ndim == 3 and points.shape[1:] == (1, 2):
+        return points[:, 0, :]
+    return points
