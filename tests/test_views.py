@@ -64,3 +64,17 @@ def test_an_easy_pair_tries_no_synthetic_view():
 def test_bad_view_options_are_named(kwargs, fragment):
     with pytest.raises(ValueError, match=fragment):
         affcorr.Pipeline(threads=1, **kwargs)
+
+
+def test_the_cli_takes_the_view_options(tmp_path):
+    from affcorr import cli
+
+    args = cli.build_parser().parse_args(["match", "a.png", "b.png", "-o", "x.npz"])
+    assert args.views == affcorr.PIPELINE_DEFAULTS["views"] == "auto"
+    assert args.view_budget is None
+    out = tmp_path / "h.json"
+    code = cli.main(
+        ["homography", str(GRAF / "graf1.png"), str(GRAF / "graf3.png"), "--views", "off",
+         "--max-keypoints", "512", "-o", str(out)]
+    )  # fmt: skip
+    assert code == 0 and out.is_file()

@@ -107,6 +107,8 @@ def _pipeline(args):
         dense_model=args.dense_model,
         shape_model=args.shape_model,
         refine_affine=args.refine_affine,
+        views=args.views,
+        view_budget=args.view_budget,
     )
 
 
@@ -144,6 +146,20 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
         default=PIPELINE_DEFAULTS["refine_affine"],
         help="refine the ACs against the images by affine Lucas-Kanade (affcorr.refine_affine; "
         "default: %(default)s)",
+    )
+    p.add_argument(
+        "--views",
+        choices=["auto", "full", "off"],
+        default=PIPELINE_DEFAULTS["views"],
+        help="synthetic views (rotations, zooms, tilts) for pairs the plain matcher cannot "
+        "solve: auto tries them only when the plain pair fails verification (default: "
+        "%(default)s)",
+    )
+    p.add_argument(
+        "--view-budget",
+        type=float,
+        default=None,
+        help="seconds after which the view cascade starts no new view (default: no limit)",
     )
 
 

@@ -29,11 +29,12 @@ pub const REFINE_AFFINE: bool = true;
 /// The view cascade: synthetic views only when the plain pair fails verification.
 pub const VIEWS: ViewMode = ViewMode::Auto;
 
-/// The view cascade's verification: at least this many inliers to a fundamental matrix...
-pub const VIEW_MIN_INLIERS: usize = 30;
+/// The view cascade's verification: at least this many matches whose point and A agree with
+/// one fundamental matrix...
+pub const VIEW_MIN_INLIERS: usize = 12;
 
 /// ... making up at least this share of the matches.
-pub const VIEW_MIN_INLIER_RATIO: f64 = 0.25;
+pub const VIEW_MIN_INLIER_RATIO: f64 = 0.1;
 
 /// The seed of a dense matcher's balanced sampling and of the robust estimators.
 pub const SEED: u64 = 0;

@@ -2,16 +2,22 @@
 //! rotation, zoom and tilt (the idea of ASIFT and MODS; Morel & Yu 2009, Mishkin et al. 2015).
 //!
 //! 1. The plain pair is matched and **verified**: a fundamental matrix from 3-AC samples
-//!    (`affcorr_ransac::estimate_fundamental` with the pipeline's F threshold) must have at
-//!    least [`ViewOptions::min_inliers`] inliers making up at least
-//!    [`ViewOptions::min_inlier_ratio`] of the matches. F rather than H, so that non-planar
-//!    scenes verify; wrong matches rarely agree on one F.
+//!    (`affcorr_ransac::estimate_fundamental` at the pipeline's F threshold) scored with the
+//!    affine Sampson error too ([`VERIFY_AFFINE_WEIGHT`]), so that a match counts only when
+//!    its point *and* its A agree with F, must have at least [`ViewOptions::min_inliers`]
+//!    such inliers making up at least [`ViewOptions::min_inlier_ratio`] of the matches. F
+//!    rather than H, so that non-planar scenes verify. Points alone are not enough: a few
+//!    dozen wrong matches of a rotated pair often fit some F within 2 px, while their ACs
+//!    rarely fit it (benches/results/views.md has the measurement).
 //! 2. If it fails (and [`ViewMode::Auto`]), synthetic views of one image are matched against
 //!    the other, in order, until one verifies ([`ViewMode::Full`] tries them all and keeps
 //!    the best):
 //!    - **AC-guided** first: when the plain pass has a few F-inliers, their median affine map
 //!      D says the dominant rotation, zoom and tilt; the view undoes it (B by D⁻¹, or A by D
-//!      when that shrinks instead of enlarging).
+//!      when that shrinks instead of enlarging). Later, any view whose ACs partly agree (more
+//!      than every guide so far, but too few to verify) puts the view that undoes *their*
+//!      dominant map at the front of the queue (up to three guided views a pair): a tilt view
+//!      that finds the right tilt but not the rotation leads to the view with both.
 //!    - in-plane **rotations** of B by 90°, 270°, 180° (the matchers hold up to about ±45°),
 //!      **zooms** of A or B by ½, the diagonal rotations, then zooms by ¼ (the matcher's
 //!      keypoint budget lands on the overlap);
@@ -31,6 +37,11 @@ use affcorr_ransac::{Correspondences, EstimatorOptions, RansacError, estimate_fu
 
 use crate::defaults;
 use crate::error::{PipelineError, Result};
+
+/// The weight λ (px² per unit of affine Sampson error) of the affine residual in
+/// verification: the estimators' own weight for "the affine part is accurate too"
+/// (`affine_weight` of `affcorr_ransac::EstimatorOptions`, docs/design.md §5).
+pub const VERIFY_AFFINE_WEIGHT: f64 = 50.0;
 
 /// Whether and how the pipeline synthesises views.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -86,7 +97,7 @@ pub struct ViewOptions {
     pub time_budget: Option<Duration>,
     /// At most this many synthetic views.
     pub max_views: usize,
-    /// Verification: at least this many F-inliers.
+    /// Verification: at least this many F-inliers (point and affine residual).
     pub min_inliers: usize,
     /// Verification: F-inliers / matches at least this.
     pub min_inlier_ratio: f64,
@@ -287,7 +298,8 @@ pub fn guided_view(inlier_acs: &[[f64; 8]]) -> Option<ViewSpec> {
     })
 }
 
-/// The F-inliers of ACs (in any pixels): 0 without a model; the inlier mask.
+/// The F-inliers of ACs (in any pixels) under the point and affine residual: 0 without a
+/// model; the inlier mask.
 pub(crate) fn verify(corrs: &[[f64; 8]]) -> Result<(usize, Vec<bool>)> {
     if corrs.len() < 8 {
         return Ok((0, vec![false; corrs.len()]));
@@ -295,6 +307,7 @@ pub(crate) fn verify(corrs: &[[f64; 8]]) -> Result<(usize, Vec<bool>)> {
     let data = Correspondences::from_ac_rows(corrs)?;
     let mut o = EstimatorOptions::default();
     o.ransac.threshold = defaults::FUNDAMENTAL_THRESHOLD;
+    o.affine_weight = VERIFY_AFFINE_WEIGHT;
     match estimate_fundamental(&data, &o) {
         Ok(e) => Ok((e.num_inliers, e.inliers)),
         Err(RansacError::NoModel { .. }) => Ok((0, vec![false; corrs.len()])),
