@@ -316,7 +316,7 @@ def test_batch_quality_is_per_pair(e_data):
         )
     with pytest.raises(ValueError, match="pair 1.*quality"):
         affcorr.estimate_relative_pose_batch(
-            [ec, ec], scene.K1, scene.K2, sampler="prosac", quality=[q, q[:5]]
+            [ec, ec], scene.K1, scene.K2, sampler="prosac", quality=[q, q[:5]], on_error="raise"
         )
 
 
@@ -341,9 +341,13 @@ def test_batch_pair_options_override_the_shared_ones(h_data):
     with pytest.raises(ValueError, match="pair_options"):
         affcorr.estimate_homography_batch(pairs, pair_options=[{}])
     with pytest.raises(ValueError, match="pair 1: unknown option bogus"):
-        affcorr.estimate_homography_batch(pairs, pair_options=[{}, {"bogus": 1}, {}])
+        affcorr.estimate_homography_batch(
+            pairs, pair_options=[{}, {"bogus": 1}, {}], on_error="raise"
+        )
     with pytest.raises(ValueError, match="pair 0.*scoring"):
-        affcorr.estimate_homography_batch(pairs, pair_options=[{"scoring": "x"}, {}, {}])
+        affcorr.estimate_homography_batch(
+            pairs, pair_options=[{"scoring": "x"}, {}, {}], on_error="raise"
+        )
 
 
 # --- no model ------------------------------------------------------------------------------------
@@ -449,13 +453,15 @@ def test_invalid_intrinsics(k, message):
 
 
 def test_batch_errors_name_the_pair():
+    # on_error="raise": the old behaviour; by default each bad pair is a PairError in its place
+    # (tests/test_reliability_results.py).
     with pytest.raises(ValueError, match=r"pair 1: corrs must have shape"):
-        affcorr.estimate_homography_batch([GOOD, GOOD[:, :3]])
+        affcorr.estimate_homography_batch([GOOD, GOOD[:, :3]], on_error="raise")
     with pytest.raises(ValueError, match=r"pair 2: corrs\[4\] contains NaN"):
-        affcorr.estimate_fundamental_batch([GOOD, GOOD, nan_row()])
+        affcorr.estimate_fundamental_batch([GOOD, GOOD, nan_row()], on_error="raise")
     with pytest.raises(ValueError, match=r"pair 0: K2.*focal"):
         bad = np.array([[500.0, 0, 320], [0, -500, 240], [0, 0, 1]])
-        affcorr.estimate_relative_pose_batch([GOOD, GOOD], K, [bad, K])
+        affcorr.estimate_relative_pose_batch([GOOD, GOOD], K, [bad, K], on_error="raise")
     with pytest.raises(ValueError, match=r"K1 must have shape"):
         affcorr.estimate_relative_pose_batch([GOOD, GOOD], [K] * 3, K)
     with pytest.raises(ValueError, match="unknown option foo"):

@@ -228,8 +228,11 @@ def test_bad_images(tmp_path):
         p.match_pair(A_PATH, 3.5)
     with pytest.raises(ValueError, match=r"pairs\[1\]"):
         p.match_pairs([(A_PATH, B_PATH), (A_PATH,)])
+    # A failing pair is its own error (issue 23); on_error="raise" raises it as before.
     with pytest.raises(FileNotFoundError, match=r"pairs\[0\].*missing.png"):
-        p.match_pairs([(A_PATH, tmp_path / "missing.png")])
+        p.match_pairs([(A_PATH, tmp_path / "missing.png")], on_error="raise")
+    (failed,) = p.match_pairs([(A_PATH, tmp_path / "missing.png")])
+    assert isinstance(failed.error, FileNotFoundError) and failed.index == 0
 
 
 def test_bad_intrinsics_are_rejected_before_matching():

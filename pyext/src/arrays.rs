@@ -42,7 +42,12 @@ impl<'py> F64Array<'py> {
         let converted = py
             .import("numpy")?
             .call_method("ascontiguousarray", (obj,), Some(&kwargs))
-            .map_err(|e| PyValueError::new_err(format!("{name} must be a numeric array: {e}")))?;
+            .map_err(|e| {
+                // A KeyboardInterrupt in the argument's __array__ stays one.
+                crate::errors::rewrap(e, |e| {
+                    PyValueError::new_err(format!("{name} must be a numeric array: {e}"))
+                })
+            })?;
         let array = converted
             .cast_into::<PyArrayDyn<f64>>()
             .map_err(|_| PyValueError::new_err(format!("{name} must be a numeric array")))?;
@@ -159,4 +164,67 @@ pub fn flatten<const W: usize>(rows: Vec<[f64; W]>) -> Vec<f64> {
 /// Rust input errors become `ValueError` with the core crate's message.
 pub fn value_error<E: std::fmt::Display>(e: E) -> PyErr {
     PyValueError::new_err(e.to_string())
+}
+
+/// An integer option: a Python int or any object with `__index__` (numpy integers included),
+/// never a bool or a float, in `min..=max`. Every error names the option: `what` describes
+/// the accepted values ("a positive int", "a non-negative integer"); a value past `max`
+/// (however many bits) says `"{name} = {value} is over the limit of {max}"`.
+pub fn int_option(
+    v: &Bound<'_, PyAny>,
+    name: &str,
+    what: &str,
+    min: u64,
+    max: u64,
+) -> PyResult<u64> {
+    let py = v.py();
+    let bad = || {
+        let r = v
+            .repr()
+            .map(|r| r.to_string())
+            .unwrap_or_else(|_| "?".into());
+        PyValueError::new_err(format!("{name} must be {what}, got {r}"))
+    };
+    if v.is_instance_of::<pyo3::types::PyBool>() {
+        return Err(bad());
+    }
+    let index = py
+        .import("operator")?
+        .call_method1("index", (v,))
+        .map_err(|e| crate::errors::rewrap(e, |_| bad()))?;
+    let value: i128 = match index.extract() {
+        Ok(x) => x,
+        // Beyond 128 bits: below min or over max, by its sign.
+        Err(_) if index.lt(0)? => return Err(bad()),
+        Err(_) => i128::MAX,
+    };
+    if value < i128::from(min) {
+        return Err(bad());
+    }
+    if value > i128::from(max) {
+        return Err(PyValueError::new_err(format!(
+            "{name} = {} is over the limit of {max}",
+            index.str()?
+        )));
+    }
+    Ok(value as u64)
+}
+
+/// [`int_option`] for an optional option: `None` stays `None`.
+pub fn opt_int_option(
+    v: Option<&Bound<'_, PyAny>>,
+    name: &str,
+    what: &str,
+    min: u64,
+    max: u64,
+) -> PyResult<Option<u64>> {
+    match v {
+        Some(v) if !v.is_none() => int_option(v, name, what, min, max).map(Some),
+        _ => Ok(None),
+    }
+}
+
+/// A `u64` option as `usize` (lossless on the 64-bit targets this builds for).
+pub fn to_usize(v: u64) -> usize {
+    usize::try_from(v).unwrap_or(usize::MAX)
 }

@@ -70,3 +70,19 @@ pub fn pipeline_error(e: PipelineError, what: Option<&str>) -> PyErr {
     };
     raise(kind, e.to_string(), what)
 }
+
+/// Whether `e` must reach the caller unchanged: anything that is not an `Exception`
+/// (`KeyboardInterrupt`, `SystemExit`, ...), which no `except ValueError` may swallow. Code
+/// that rewraps an error into a `ValueError` with more context checks this first.
+pub fn passes_through(py: pyo3::Python<'_>, e: &PyErr) -> bool {
+    !e.is_instance_of::<pyo3::exceptions::PyException>(py)
+}
+
+/// `e` itself when it [`passes_through`], else `rewrap(e)`.
+pub fn rewrap(e: PyErr, rewrap: impl FnOnce(PyErr) -> PyErr) -> PyErr {
+    if pyo3::Python::attach(|py| passes_through(py, &e)) {
+        e
+    } else {
+        rewrap(e)
+    }
+}

@@ -122,7 +122,7 @@ fn extract_patches<'py>(
 ) -> PyResult<F32<'py>> {
     let xy = points(xy, "xy")?;
     let img = gray_image(py, image, "image")?;
-    let p = py.detach(|| extract(&img, &xy)).map_err(|e| match e {
+    let p = crate::interrupt::parallel(py, || extract(&img, &xy)).map_err(|e| match e {
         ImageError::NonFinite { row, .. } => {
             PyValueError::new_err(format!("xy[{row}] contains NaN or infinity"))
         }
@@ -177,9 +177,9 @@ fn refine_affine_py<'py>(
         try_identity,
         max_shift_std,
     };
-    let r = py
-        .detach(|| refine_affine(&img_a, &img_b, &rows, &options))
-        .map_err(|e| image_error(e, None))?;
+    let r =
+        crate::interrupt::interruptible(py, |_| refine_affine(&img_a, &img_b, &rows, &options))?
+            .map_err(|e| image_error(e, None))?;
     let n = r.corrs.len();
     let refined = ArrayD::from_shape_vec(IxDyn(&[n]), r.refined)
         .map_err(|e| PyRuntimeError::new_err(format!("internal shape error: {e}")))?;

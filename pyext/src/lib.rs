@@ -11,10 +11,14 @@
 //! - `pipeline`: the end-to-end pipeline: images → matches → ACs → H, F or relative pose, with
 //!   its defaults, matcher names and model files.
 //! - `errors`: Rust errors to Python exceptions.
+//! - `interrupt`: the per-process thread pool (fork safety) and interruptible long calls
+//!   (Ctrl-C).
 //!
 //! Every function validates its inputs here or in Rust and raises `ValueError` naming the bad
 //! argument; no Rust panic can cross this boundary because the core crates return `Result`s.
-//! Long batched calls release the GIL.
+//! Long batched calls release the GIL; parallel work runs on a pool rebuilt in a forked child,
+//! and the long calls (estimators, batches, the pipeline, the shape network) return promptly
+//! with `KeyboardInterrupt` on Ctrl-C (`interrupt.rs`).
 
 use pyo3::prelude::*;
 
@@ -22,6 +26,7 @@ mod arrays;
 mod errors;
 mod geom;
 mod image;
+mod interrupt;
 mod pipeline;
 mod ransac;
 mod runner;

@@ -433,7 +433,11 @@ impl PipelineRunner {
             let arg = image_arg(py, &a, "image_a", colour).and_then(|(a, ta)| {
                 image_arg(py, &b, "image_b", colour).map(|(b, tb)| (a, b, ta + tb))
             });
-            args.push(arg.map_err(|e| prefix_error(py, i, e)));
+            match arg {
+                // A KeyboardInterrupt (in an argument's __array__, say) stops the batch.
+                Err(e) if crate::errors::passes_through(py, &e) => return Err(e),
+                arg => args.push(arg.map_err(|e| prefix_error(py, i, e))),
+            }
         }
         let runnable: Vec<(usize, ImageSource<'_>, ImageSource<'_>)> = args
             .iter()

@@ -16,7 +16,9 @@
 //! - Estimation runs with the GIL released; the batch forms run the pairs in parallel with
 //!   rayon (`RAYON_NUM_THREADS` caps the threads).
 
-use crate::arrays::{Dim, F64Array, mat3_to_numpy, to_numpy, value_error};
+use crate::arrays::{Dim, F64Array, int_option, mat3_to_numpy, to_numpy, to_usize, value_error};
+use crate::errors::rewrap;
+use crate::interrupt::interruptible;
 use affcorr::geom::Mat3;
 use affcorr::geom::camera::Intrinsics;
 use affcorr::ransac::problems::relpose::PoseModel;
@@ -74,20 +76,26 @@ macro_rules! estimator_options {
     };
 }
 
+/// The most iterations `min_iterations` / `max_iterations` may ask for (a billion: hours of
+/// work on the largest inputs; Ctrl-C stops any of them).
+pub(crate) const MAX_ITERATIONS: u64 = 1_000_000_000;
+/// The most refits `lo_iterations` may ask for in one local optimisation.
+pub(crate) const MAX_LO_ITERATIONS: u64 = 10_000;
+
 estimator_options! {
     "threshold" => |o, v| o.ransac.threshold = number(v, "threshold")?;
-    "seed" => |o, v| o.ransac.seed = integer(v, "seed")?;
+    "seed" => |o, v| o.ransac.seed = integer(v, "seed", u64::MAX)?;
     "sample" => |o, v| o.sample = if v.is_none() { None } else { Some(choice(v, "sample", SAMPLES)?) };
     "sampler" => |o, v| o.sampler = choice(v, "sampler", SAMPLERS)?;
     "quality" => |o, v| o.quality = if v.is_none() { None } else { Some(vector(v, "quality")?) };
     "scoring" => |o, v| o.scoring = choice(v, "scoring", SCORINGS)?;
     "confidence" => |o, v| o.ransac.confidence = number(v, "confidence")?;
     "sample_reliability" => |o, v| o.ransac.sample_reliability = number(v, "sample_reliability")?;
-    "min_iterations" => |o, v| o.ransac.min_iterations = integer(v, "min_iterations")?;
-    "max_iterations" => |o, v| o.ransac.max_iterations = integer(v, "max_iterations")?;
+    "min_iterations" => |o, v| o.ransac.min_iterations = to_usize(integer(v, "min_iterations", MAX_ITERATIONS)?);
+    "max_iterations" => |o, v| o.ransac.max_iterations = to_usize(integer(v, "max_iterations", MAX_ITERATIONS)?);
     "local_optimization" => |o, v| o.ransac.local_optimization = flag(v, "local_optimization")?;
     "lo" => |o, v| o.ransac.lo = choice(v, "lo", LOS)?;
-    "lo_iterations" => |o, v| o.ransac.lo_iterations = integer(v, "lo_iterations")?;
+    "lo_iterations" => |o, v| o.ransac.lo_iterations = to_usize(integer(v, "lo_iterations", MAX_LO_ITERATIONS)?);
     "final_refinement" => |o, v| o.ransac.final_refinement = flag(v, "final_refinement")?;
     "sprt" => |o, v| o.ransac.sprt = flag(v, "sprt")?;
     "affine_weight" => |o, v| o.affine_weight = number(v, "affine_weight")?;
@@ -129,19 +137,19 @@ fn number(v: &Bound<'_, PyAny>, name: &str) -> PyResult<f64> {
     if v.is_instance_of::<pyo3::types::PyBool>() {
         return Err(type_error(name, "a number", v));
     }
-    v.extract().map_err(|_| type_error(name, "a number", v))
+    v.extract()
+        .map_err(|e| rewrap(e, |_| type_error(name, "a number", v)))
 }
 
-fn integer<T: for<'a, 'py> FromPyObject<'a, 'py>>(v: &Bound<'_, PyAny>, name: &str) -> PyResult<T> {
-    if v.is_instance_of::<pyo3::types::PyBool>() {
-        return Err(type_error(name, "a non-negative integer", v));
-    }
-    v.extract()
-        .map_err(|_| type_error(name, "a non-negative integer", v))
+/// A non-negative integer option up to `max` (Python or numpy integers; see
+/// [`int_option`]).
+fn integer(v: &Bound<'_, PyAny>, name: &str, max: u64) -> PyResult<u64> {
+    int_option(v, name, "a non-negative integer", 0, max)
 }
 
 fn flag(v: &Bound<'_, PyAny>, name: &str) -> PyResult<bool> {
-    v.extract().map_err(|_| type_error(name, "a bool", v))
+    v.extract()
+        .map_err(|e| rewrap(e, |_| type_error(name, "a bool", v)))
 }
 
 fn vector(v: &Bound<'_, PyAny>, name: &'static str) -> PyResult<Vec<f64>> {
@@ -304,13 +312,14 @@ fn run_one<M: Send>(
     nan: M,
     f: impl Fn(&Correspondences, &EstimatorOptions) -> Result<Estimate<M>, RansacError> + Send,
 ) -> PyResult<Outcome<M>> {
-    let opts = parse_options(options, EstimatorOptions::default())?;
+    let mut opts = parse_options(options, EstimatorOptions::default())?;
     let a = F64Array::extract(corrs, "corrs")?.expect_one_of(&CORRS)?;
     let (slice, width) = (a.as_slice(), a.shape()[1]);
-    py.detach(move || {
+    interruptible(py, move |cancel| {
+        opts.ransac.cancel = Some(cancel.clone());
         let data = rows_to_corrs(slice, width)?;
         outcome(f(&data, &opts), data.len(), nan)
-    })
+    })?
     .map_err(value_error)
 }
 
@@ -363,211 +372,282 @@ fn estimate_relative_pose_py<'py>(
 }
 
 // --- batches --------------------------------------------------------------------------------------
+//
+// Each pair gets its own result: `(model, info)`, or the exception the single call would have
+// raised for it (a `ValueError` "pair i: ..."), returned in its place (the Python wrappers turn
+// it into `affcorr.PairError`). A pair with fewer correspondences than a minimal sample is a
+// no-model result (as `NoModel`), not an error: matching gives such pairs. Errors of the batch
+// as a whole (corrs not a sequence, invalid shared options, per-pair lists of the wrong length)
+// raise.
 
-/// Per-pair inputs of a batch: the rows (borrowed views) and each pair's options (a shared
-/// option set, with `quality` given per pair as a list of arrays).
-struct Batch<'py> {
-    arrays: Vec<F64Array<'py>>,
-    options: Vec<EstimatorOptions>,
+/// One pair's rows and options, or the error that stopped it before estimation.
+type PairInput<'py> = PyResult<(F64Array<'py>, EstimatorOptions)>;
+
+fn pair_error(i: usize, e: PyErr) -> PyErr {
+    rewrap(e, |e| {
+        Python::attach(|py| PyValueError::new_err(format!("pair {i}: {}", e.value(py))))
+    })
+}
+
+/// The per-pair lists `name` (quality, pair_options): `None`, or one entry per pair.
+fn per_pair_list<'py>(
+    value: Option<Bound<'py, PyAny>>,
+    name: &str,
+    what: &str,
+    n: usize,
+) -> PyResult<Option<Vec<Bound<'py, PyAny>>>> {
+    let Some(v) = value.filter(|v| !v.is_none()) else {
+        return Ok(None);
+    };
+    // A dict or a string iterates, but over keys / characters: say what was meant.
+    if name == "pair_options"
+        && (v.is_instance_of::<PyDict>() || v.is_instance_of::<pyo3::types::PyString>())
+    {
+        return Err(PyValueError::new_err(format!(
+            "pair_options must be a sequence with one dict (or None) per pair, got a {}",
+            v.get_type().name()?
+        )));
+    }
+    let list: Vec<Bound<'py, PyAny>> = v
+        .try_iter()
+        .map_err(|e| {
+            rewrap(e, |_| {
+                PyValueError::new_err(format!("{name} must be a sequence of {what}, one per pair"))
+            })
+        })?
+        .collect::<PyResult<_>>()?;
+    if list.len() != n {
+        return Err(PyValueError::new_err(format!(
+            "{name} must have one entry per pair: got {} for {n} pairs",
+            list.len()
+        )));
+    }
+    Ok(Some(list))
+}
+
+/// One pair's options: the shared ones, its `quality` and its `pair_options` entry.
+fn pair_options(
+    shared: &EstimatorOptions,
+    quality: Option<&Bound<'_, PyAny>>,
+    entry: Option<&Bound<'_, PyAny>>,
+) -> PyResult<EstimatorOptions> {
+    let mut o = shared.clone();
+    if let Some(q) = quality {
+        o.quality = if q.is_none() {
+            None
+        } else {
+            Some(vector(q, "quality")?)
+        };
+    }
+    let Some(d) = entry.filter(|d| !d.is_none()) else {
+        return Ok(o);
+    };
+    let d = d
+        .cast::<PyDict>()
+        .map_err(|_| PyValueError::new_err("pair_options entries must be dicts (or None)"))?;
+    let mut unknown = Vec::new();
+    for (key, value) in d.iter() {
+        let name: String = key.extract()?;
+        if name == "quality" {
+            o.quality = if value.is_none() {
+                None
+            } else {
+                Some(vector(&value, "quality")?)
+            };
+        } else if !apply_option(&mut o, &name, &value)? {
+            unknown.push(name);
+        }
+    }
+    if !unknown.is_empty() {
+        return Err(PyValueError::new_err(format!(
+            "unknown option{} {}; valid options: {}",
+            if unknown.len() > 1 { "s" } else { "" },
+            unknown.join(", "),
+            OPTION_NAMES.join(", ")
+        )));
+    }
+    Ok(o)
 }
 
 fn read_batch<'py>(
     corrs: &Bound<'py, PyAny>,
     options: Option<&Bound<'py, PyDict>>,
-) -> PyResult<Batch<'py>> {
+) -> PyResult<Vec<PairInput<'py>>> {
     let items: Vec<Bound<'py, PyAny>> = corrs
         .try_iter()
-        .map_err(|_| PyValueError::new_err("corrs must be a sequence of (N, 8) or (N, 4) arrays"))?
+        .map_err(|e| {
+            rewrap(e, |_| {
+                PyValueError::new_err("corrs must be a sequence of (N, 8) or (N, 4) arrays")
+            })
+        })?
         .collect::<PyResult<_>>()?;
-    let arrays = items
-        .iter()
-        .enumerate()
-        .map(|(i, c)| {
-            F64Array::extract(c, "corrs")
-                .and_then(|a| a.expect_one_of(&CORRS))
-                .map_err(|e| pair_error(i, e))
-        })
-        .collect::<PyResult<Vec<_>>>()?;
+    let n = items.len();
     // `quality` is per pair in a batch: a sequence of (N_i,) arrays (or None entries);
     // `pair_options` a sequence of option dicts, one per pair, over the shared options.
-    let (quality, pair_options, options) = match options {
+    let (quality, entries, shared) = match options {
         Some(d) => {
             let d = d.copy()?;
             let quality = d.get_item("quality")?;
             d.del_item("quality").ok();
-            let pair_options = d.get_item("pair_options")?;
+            let entries = d.get_item("pair_options")?;
             d.del_item("pair_options").ok();
-            (quality, pair_options, Some(d))
+            (quality, entries, Some(d))
         }
         None => (None, None, None),
     };
-    let options = (quality, options);
-    let shared = parse_options(options.1.as_ref(), EstimatorOptions::default())?;
-    let mut per_pair = vec![shared; arrays.len()];
-    if let Some(q) = options.0.filter(|q| !q.is_none()) {
-        let list: Vec<Bound<'py, PyAny>> = q
-            .try_iter()
-            .map_err(|_| {
-                PyValueError::new_err("quality must be a sequence of (N,) arrays, one per pair")
-            })?
-            .collect::<PyResult<_>>()?;
-        if list.len() != arrays.len() {
-            return Err(PyValueError::new_err(format!(
-                "quality must have one entry per pair: got {} for {} pairs",
-                list.len(),
-                arrays.len()
-            )));
-        }
-        for (i, (o, q)) in per_pair.iter_mut().zip(&list).enumerate() {
-            o.quality = if q.is_none() {
-                None
-            } else {
-                Some(vector(q, "quality").map_err(|e| pair_error(i, e))?)
+    let shared = parse_options(shared.as_ref(), EstimatorOptions::default())?;
+    // Shared options apply to every pair: invalid ones are the batch's error.
+    affcorr::ransac::engine::check_options(&shared.ransac).map_err(value_error)?;
+    let quality = per_pair_list(quality, "quality", "(N,) arrays", n)?;
+    let entries = per_pair_list(entries, "pair_options", "dicts", n)?;
+    items
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let pair = || -> PairInput<'py> {
+                let a = F64Array::extract(c, "corrs")?.expect_one_of(&CORRS)?;
+                let o = pair_options(
+                    &shared,
+                    quality.as_ref().map(|q| &q[i]),
+                    entries.as_ref().map(|e| &e[i]),
+                )?;
+                Ok((a, o))
             };
-        }
-    }
-    if let Some(p) = pair_options.filter(|p| !p.is_none()) {
-        // A dict or a string iterates, but over keys / characters: say what was meant.
-        if p.is_instance_of::<PyDict>() || p.is_instance_of::<pyo3::types::PyString>() {
-            return Err(PyValueError::new_err(format!(
-                "pair_options must be a sequence with one dict (or None) per pair, got a {}",
-                p.get_type().name()?
-            )));
-        }
-        let list: Vec<Bound<'py, PyAny>> = p
-            .try_iter()
-            .map_err(|_| {
-                PyValueError::new_err("pair_options must be a sequence of dicts, one per pair")
-            })?
-            .collect::<PyResult<_>>()?;
-        if list.len() != arrays.len() {
-            return Err(PyValueError::new_err(format!(
-                "pair_options must have one entry per pair: got {} for {} pairs",
-                list.len(),
-                arrays.len()
-            )));
-        }
-        for (i, (o, d)) in per_pair.iter_mut().zip(&list).enumerate() {
-            if d.is_none() {
-                continue;
-            }
-            let d = d.cast::<PyDict>().map_err(|_| {
-                PyValueError::new_err(format!("pair {i}: pair_options entries must be dicts"))
-            })?;
-            let mut unknown = Vec::new();
-            for (key, value) in d.iter() {
-                let name: String = key.extract()?;
-                if name == "quality" {
-                    o.quality = if value.is_none() {
-                        None
-                    } else {
-                        Some(vector(&value, "quality").map_err(|e| pair_error(i, e))?)
-                    };
-                } else if !apply_option(o, &name, &value).map_err(|e| pair_error(i, e))? {
-                    unknown.push(name);
-                }
-            }
-            if !unknown.is_empty() {
-                return Err(PyValueError::new_err(format!(
-                    "pair {i}: unknown option{} {}; valid options: {}",
-                    if unknown.len() > 1 { "s" } else { "" },
-                    unknown.join(", "),
-                    OPTION_NAMES.join(", ")
-                )));
-            }
-        }
-    }
-    Ok(Batch {
-        arrays,
-        options: per_pair,
-    })
+            pair().map_err(|e| pair_error(i, e))
+        })
+        // A KeyboardInterrupt (in an argument's __array__, say) stops the batch.
+        .map(|r| match r {
+            Err(e) if Python::attach(|py| crate::errors::passes_through(py, &e)) => Err(e),
+            r => Ok(r),
+        })
+        .collect::<PyResult<Vec<_>>>()
 }
 
-fn pair_error(i: usize, e: PyErr) -> PyErr {
-    Python::attach(|py| PyValueError::new_err(format!("pair {i}: {}", e.value(py))))
+/// One pair's outcome: `NotEnoughData` is a no-model result too in a batch.
+fn batch_outcome<M>(
+    r: Result<Estimate<M>, RansacError>,
+    n: usize,
+    nan: M,
+) -> Result<Outcome<M>, RansacError> {
+    match r {
+        Err(RansacError::NotEnoughData { .. }) => {
+            outcome(Err(RansacError::NoModel { iterations: 0 }), n, nan)
+        }
+        r => outcome(r, n, nan),
+    }
 }
 
-/// Runs `f` over every pair in parallel with the GIL released; the first invalid pair raises
-/// `ValueError` naming its index.
+/// Runs `f` over every valid pair in parallel, interruptibly, with the GIL released; each pair
+/// gets its outcome or its error (`pair i: ...`).
 fn run_batch<M: Send + Clone + Sync>(
     py: Python<'_>,
-    batch: &Batch<'_>,
+    pairs: &[PairInput<'_>],
     nan: M,
     f: impl Fn(usize, &Correspondences, &EstimatorOptions) -> Result<Estimate<M>, RansacError>
     + Sync
     + Send,
-) -> PyResult<Vec<Outcome<M>>> {
-    let views: Vec<(&[f64], usize)> = batch
-        .arrays
+) -> PyResult<Vec<PyResult<Outcome<M>>>> {
+    let views: Vec<Option<(&[f64], usize, &EstimatorOptions)>> = pairs
         .iter()
-        .map(|a| (a.as_slice(), a.shape()[1]))
+        .map(|p| {
+            p.as_ref()
+                .ok()
+                .map(|(a, o)| (a.as_slice(), a.shape()[1], o))
+        })
         .collect();
-    let opts = &batch.options;
-    let results: Vec<Result<Outcome<M>, (usize, RansacError)>> = py.detach(|| {
-        views
-            .par_iter()
-            .enumerate()
-            .map(|(i, &(slice, width))| {
-                let data = rows_to_corrs(slice, width).map_err(|e| (i, e))?;
-                outcome(f(i, &data, &opts[i]), data.len(), nan.clone()).map_err(|e| (i, e))
-            })
-            .collect()
-    });
-    results
-        .into_iter()
-        .map(|r| r.map_err(|(i, e)| PyValueError::new_err(format!("pair {i}: {e}"))))
-        .collect()
+    let results: Vec<Option<Result<Outcome<M>, RansacError>>> =
+        interruptible(py, |cancel| {
+            views
+                .par_iter()
+                .enumerate()
+                .map(|(i, view)| {
+                    let &(slice, width, opts) = view.as_ref()?;
+                    if cancel.is_cancelled() {
+                        return None;
+                    }
+                    let mut opts = opts.clone();
+                    opts.ransac.cancel = Some(cancel.clone());
+                    Some(rows_to_corrs(slice, width).and_then(|data| {
+                        batch_outcome(f(i, &data, &opts), data.len(), nan.clone())
+                    }))
+                })
+                .collect()
+        })?;
+    Ok(pairs
+        .iter()
+        .zip(results)
+        .enumerate()
+        .map(|(i, (p, r))| match (p, r) {
+            (Err(e), _) => Err(e.clone_ref(py)),
+            (Ok(_), Some(Ok(o))) => Ok(o),
+            (Ok(_), Some(Err(e))) => Err(PyValueError::new_err(format!("pair {i}: {e}"))),
+            (Ok(_), None) => unreachable!("an uncancelled batch runs every valid pair"),
+        })
+        .collect())
 }
 
-/// Reads `K` for a batch of `n` pairs: one (3, 3) for all, or (n, 3, 3) / a list of n.
+/// Reads `K` for a batch of `n` pairs: one (3, 3) for all, or (n, 3, 3) / a list of n. A bad
+/// shape raises; an invalid K of one pair is that pair's error.
 fn batch_intrinsics(
     obj: &Bound<'_, PyAny>,
     name: &'static str,
     n: usize,
-) -> PyResult<Vec<Intrinsics>> {
+) -> PyResult<Vec<PyResult<Intrinsics>>> {
     let a = F64Array::extract(obj, name)?.expect_one_of(&[
         &[Dim::Is(3), Dim::Is(3)],
         &[Dim::Is(n), Dim::Is(3), Dim::Is(3)],
     ])?;
-    let mats: Vec<Mat3> = a
+    let shared = a.shape().len() == 2;
+    let ks: Vec<PyResult<Intrinsics>> = a
         .rows::<9>()
         .iter()
-        .map(|r| Mat3::from_row_slice(r))
-        .collect();
-    let ks = mats
-        .into_iter()
         .enumerate()
-        .map(|(i, k)| {
-            Intrinsics::new(k, name).map_err(|e| {
-                if a.shape().len() == 2 {
+        .map(|(i, r)| {
+            Intrinsics::new(Mat3::from_row_slice(r), name).map_err(|e| {
+                if shared {
                     value_error(e)
                 } else {
                     PyValueError::new_err(format!("pair {i}: {e}"))
                 }
             })
         })
-        .collect::<PyResult<Vec<_>>>()?;
-    Ok(if ks.len() == 1 && a.shape().len() == 2 {
-        vec![ks[0]; n]
-    } else {
-        ks
-    })
+        .collect();
+    if shared {
+        // One K for every pair: invalid, it is the batch's error.
+        let k = ks.into_iter().next().expect("one matrix")?;
+        return Ok((0..n).map(|_| Ok(k)).collect());
+    }
+    Ok(ks)
 }
 
-/// A batch of a 3×3-matrix estimator (H or F) as a list of `(model, info)`.
+/// The items of a batch's list: `(model, info)` tuples, or the pair's exception object.
+fn batch_list<'py, M>(
+    py: Python<'py>,
+    out: Vec<PyResult<Outcome<M>>>,
+    convert: impl Fn(Python<'py>, &Outcome<M>) -> PyResult<Bound<'py, PyAny>>,
+) -> PyResult<Bound<'py, PyList>> {
+    let items = out
+        .into_iter()
+        .map(|r| match r {
+            Ok(o) => convert(py, &o),
+            Err(e) => Ok(e.into_value(py).into_bound(py).into_any()),
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    PyList::new(py, items)
+}
+
+/// A batch of a 3×3-matrix estimator (H or F).
 fn matrix_batch<'py>(
     py: Python<'py>,
     corrs: &Bound<'py, PyAny>,
     options: Option<&Bound<'py, PyDict>>,
     estimator: fn(&Correspondences, &EstimatorOptions) -> affcorr::ransac::Result<Estimate<Mat3>>,
 ) -> PyResult<Bound<'py, PyList>> {
-    let batch = read_batch(corrs, options)?;
-    let out = run_batch(py, &batch, nan_mat3(), |_, d, o| estimator(d, o))?;
-    let items = out
-        .iter()
-        .map(|o| mat_result(py, o))
-        .collect::<PyResult<Vec<_>>>()?;
-    PyList::new(py, items)
+    let pairs = read_batch(corrs, options)?;
+    let out = run_batch(py, &pairs, nan_mat3(), |_, d, o| estimator(d, o))?;
+    batch_list(py, out, |py, o| {
+        Ok(mat_result(py, o)?.into_pyobject(py)?.into_any())
+    })
 }
 
 #[pyfunction]
@@ -600,16 +680,28 @@ fn estimate_relative_pose_batch_py<'py>(
     K2: &Bound<'py, PyAny>,
     options: Option<&Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyList>> {
-    let batch = read_batch(corrs, options)?;
-    let n = batch.arrays.len();
+    let mut pairs = read_batch(corrs, options)?;
+    let n = pairs.len();
     let k1 = batch_intrinsics(K1, "K1", n)?;
     let k2 = batch_intrinsics(K2, "K2", n)?;
-    let out = run_batch(py, &batch, nan_pose(), |i, d, o| {
-        estimate_relative_pose(d, &k1[i], &k2[i], o)
+    // A pair with an invalid K fails with that K's error (its rows' error first).
+    let mut ks = Vec::with_capacity(n);
+    for (i, (a, b)) in k1.into_iter().zip(k2).enumerate() {
+        match (a, b) {
+            (Ok(a), Ok(b)) => ks.push(Some((a, b))),
+            (Err(e), _) | (_, Err(e)) => {
+                if pairs[i].is_ok() {
+                    pairs[i] = Err(e);
+                }
+                ks.push(None);
+            }
+        }
+    }
+    let out = run_batch(py, &pairs, nan_pose(), |i, d, o| {
+        let (k1, k2) = ks[i].as_ref().expect("pairs with an invalid K do not run");
+        estimate_relative_pose(d, k1, k2, o)
     })?;
-    let items = out
-        .iter()
-        .map(|o| pose_result(py, o))
-        .collect::<PyResult<Vec<_>>>()?;
-    PyList::new(py, items)
+    batch_list(py, out, |py, o| {
+        Ok(pose_result(py, o)?.into_pyobject(py)?.into_any())
+    })
 }

@@ -13,10 +13,13 @@
 
 use std::path::PathBuf;
 
-use crate::arrays::{flatten, to_numpy};
+use crate::arrays::{flatten, opt_int_option, to_numpy, to_usize};
 use crate::errors::{image_error, runner_error};
 use crate::image::{f32_array, f64_vec, gray_image, points};
+use crate::interrupt::interruptible;
 use affcorr::image::{AffineRefineOptions, refine_affine};
+use affcorr::runner::contract::MAX_THREADS;
+use affcorr::runner::shape::MAX_BATCH_SIZE;
 use affcorr::runner::{
     ShapeEstimator, ShapeModelOptions, ShapeOutputs, init_ort as init,
     ort_library as loaded_library,
@@ -76,17 +79,31 @@ pub struct ShapeRunner {
 #[pymethods]
 impl ShapeRunner {
     #[new]
-    #[pyo3(signature = (model_path, *, ort_library = None, threads = None, batch_size = 512))]
+    #[pyo3(signature = (model_path, *, ort_library = None, threads = None, batch_size = None))]
     fn new(
         py: Python<'_>,
         model_path: PathBuf,
         ort_library: Option<PathBuf>,
-        threads: Option<usize>,
-        batch_size: usize,
+        threads: Option<&Bound<'_, PyAny>>,
+        batch_size: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
-        let options = ShapeModelOptions {
+        let threads = opt_int_option(
             threads,
+            "threads",
+            "a positive int or None",
+            1,
+            MAX_THREADS as u64,
+        )?;
+        let batch_size = opt_int_option(
             batch_size,
+            "batch_size",
+            "a positive int",
+            1,
+            MAX_BATCH_SIZE as u64,
+        )?;
+        let options = ShapeModelOptions {
+            threads: threads.map(to_usize),
+            batch_size: batch_size.map_or(ShapeModelOptions::default().batch_size, to_usize),
         };
         py.detach(|| {
             init(ort_library.as_deref())?;
@@ -116,13 +133,12 @@ impl ShapeRunner {
         }
         let model = self.inner.model();
         let (a, b) = (a.as_slice()?, b.as_slice()?);
-        let (raw, p) = py
-            .detach(|| {
-                let raw = model.predict_raw_slices(a, b)?;
-                let p = model.decode(&raw)?;
-                Ok((raw, p))
-            })
-            .map_err(|e| runner_error(e, None))?;
+        let (raw, p) = interruptible(py, |_| {
+            let raw = model.predict_raw_slices(a, b)?;
+            let p = model.decode(&raw)?;
+            Ok((raw, p))
+        })?
+        .map_err(|e| runner_error(e, None))?;
         let n = p.len();
         let out = PyDict::new(py);
         out.set_item("orientation_a", f64_vec(py, p.orientation_a)?)?;
@@ -179,7 +195,7 @@ impl ShapeRunner {
         }
         let img_a = gray_image(py, image_a, "image_a")?;
         let img_b = gray_image(py, image_b, "image_b")?;
-        let e = py.detach(|| -> PyResult<_> {
+        let e = interruptible(py, |_| -> PyResult<_> {
             let mut e = self
                 .inner
                 .estimate(&img_a, &img_b, &x1, &x2)
@@ -191,7 +207,7 @@ impl ShapeRunner {
                     .corrs;
             }
             Ok(e)
-        })?;
+        })??;
         let n = e.corrs.len();
         Ok((
             to_numpy(py, &[n, 8], flatten(e.corrs))?,

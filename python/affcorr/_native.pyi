@@ -172,13 +172,16 @@ def estimate_relative_pose(
 
 def estimate_homography_batch(
     corrs: Sequence[ArrayLike], **options: Any
-) -> list[tuple[NDArray[np.float64], dict[str, Any]]]:
-    """estimate_homography over many pairs in parallel (rayon); quality is one array per pair."""
+) -> list[tuple[NDArray[np.float64], dict[str, Any]] | ValueError]:
+    """estimate_homography over many pairs in parallel (rayon); quality is one array per pair.
+    A pair with invalid input is its ValueError ("pair i: ...") in its place; too few rows is a
+    no-model result; Ctrl-C raises KeyboardInterrupt."""
 
 def estimate_fundamental_batch(
     corrs: Sequence[ArrayLike], **options: Any
-) -> list[tuple[NDArray[np.float64], dict[str, Any]]]:
-    """estimate_fundamental over many pairs in parallel (rayon)."""
+) -> list[tuple[NDArray[np.float64], dict[str, Any]] | ValueError]:
+    """estimate_fundamental over many pairs in parallel (rayon); per-pair errors as
+    estimate_homography_batch."""
 
 def estimate_relative_pose_batch(
     corrs: Sequence[ArrayLike], K1: ArrayLike, K2: ArrayLike, **options: Any
@@ -187,6 +190,7 @@ def estimate_relative_pose_batch(
         tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]],
         dict[str, Any],
     ]
+    | ValueError
 ]:
     """estimate_relative_pose over many pairs in parallel; K1, K2: one (3, 3) or one per pair."""
 
@@ -231,7 +235,8 @@ class ShapeRunner:
     affcorr.contract, patch_size, angle_bins, scale_bins, decode). ort_library: the
     libonnxruntime to load (``None``: ``ORT_DYLIB_PATH``); ignored once ONNX Runtime is loaded.
     Raises FileNotFoundError (no such model), RuntimeError (ONNX Runtime or the model),
-    ValueError (threads < 1, batch_size < 1)."""
+    ValueError naming the option (threads not in 1..=1024, batch_size not in 1..=65536; Python
+    or numpy ints)."""
 
     def __new__(
         cls,
@@ -239,7 +244,7 @@ class ShapeRunner:
         *,
         ort_library: str | os.PathLike[str] | None = None,
         threads: int | None = None,
-        batch_size: int = 512,
+        batch_size: int | None = None,
     ) -> ShapeRunner: ...
     def predict(
         self, patches_a: ArrayLike, patches_b: ArrayLike, return_logits: bool = False
@@ -362,9 +367,12 @@ class PipelineRunner:
         (keypoints in A, keypoints in B)); GIL released."""
     def match_pairs(
         self, pairs: Sequence[tuple[Any, Any]]
-    ) -> list[tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]]:
+    ) -> list[
+        tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]
+        | Exception
+    ]:
         """match_pair over the pairs, in parallel on single-threaded copies of the models when
-        threads > 1; errors name pairs[i]."""
+        threads > 1; a failing pair is its exception ("pairs[i]: ...") in its place."""
     @property
     def matcher(self) -> str: ...
     @property

@@ -66,6 +66,19 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
 - The ``_batch`` forms take the options once for every pair, and ``pair_options``: a list with
   one dict per pair (or ``None``) whose entries override the shared options for that pair
   (``threshold``, ``seed`` and ``quality`` included).
+- **Batches keep every pair's result.** The list has one item per pair, in order: its
+  ``(model, info)``, or a :class:`PairError` (``index``, ``message``, and ``error``, the
+  ``ValueError`` the single call would raise for that pair) in its place when that pair's
+  input is invalid; the other pairs are estimated as usual. A pair with fewer
+  correspondences than a minimal sample (0 or 1 matches, say) is not an error but a no-model
+  result, as when no sample gives a model. ``on_error="raise"`` raises the first pair's error
+  instead (the behaviour before). Errors of the whole batch (``corrs`` not a sequence, invalid
+  shared options, a ``quality`` or ``pair_options`` list of the wrong length, ``K`` of the wrong
+  shape) raise either way.
+- Ctrl-C stops a long estimate or batch within a fraction of a second with
+  ``KeyboardInterrupt`` (docs/reliability.md).
+- Integer options (``seed``, ``max_iterations``, ...) take Python or numpy integers; errors
+  name the option and, past a bound, give it (``max_iterations`` <= 10**9).
 - The same data, options and ``seed`` give bit-identical results.
 """
 
@@ -82,6 +95,7 @@ from . import _native
 
 __all__ = [
     "ESTIMATOR_OPTIONS",
+    "PairError",
     "RansacInfo",
     "RelativePose",
     "estimate_fundamental",
@@ -161,6 +175,56 @@ class RelativePose:
     def __repr__(self) -> str:
         t = np.array2string(self.t, precision=4, suppress_small=True, separator=", ")
         return f"RelativePose(angle={np.degrees(self.angle):.4g} deg, t={t})"
+
+
+class PairError(Exception):
+    """The error of one pair of a batch, returned in that pair's place in the batch's list.
+
+    A batch (``estimate_*_batch``, :meth:`affcorr.Pipeline.match_pairs`) gives every pair its
+    result or its own error: ``[r if not isinstance(r, PairError) else ... for r in out]``.
+    ``raise item`` (or ``on_error="raise"``) turns it back into an exception.
+
+    Attributes:
+        index: the pair's position in the batch.
+        message: what went wrong, prefixed with the pair (``"pair 3: corrs[4] contains NaN or
+            infinity"``, ``"pairs[1]: image_a: cannot decode image ..."``).
+        error: the exception the single-pair call would have raised (``ValueError``,
+            ``FileNotFoundError`` or ``RuntimeError``).
+    """
+
+    def __init__(self, index: int, error: BaseException) -> None:
+        super().__init__(str(error))
+        self.index = index
+        self.message = str(error)
+        self.error = error
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        return (PairError, (self.index, self.error))
+
+    def __repr__(self) -> str:
+        return f"PairError(index={self.index}, message={self.message!r})"
+
+
+_ON_ERROR = ("return", "raise")
+
+
+def _check_on_error(on_error: str) -> None:
+    if on_error not in _ON_ERROR:
+        raise ValueError(f'on_error must be "return" or "raise", got {on_error!r}')
+
+
+def _per_pair(items: list[Any], convert: Any, on_error: str) -> list[Any]:
+    """Native batch items (a result, or the pair's exception object) as results and
+    :class:`PairError` s; with ``on_error="raise"`` the first error raises."""
+    out = []
+    for i, item in enumerate(items):
+        if isinstance(item, BaseException):
+            if on_error == "raise":
+                raise item
+            out.append(PairError(i, item))
+        else:
+            out.append(convert(item))
+    return out
 
 
 def _info(d: dict[str, Any]) -> RansacInfo:
@@ -292,13 +356,16 @@ def estimate_homography_batch(
     threshold: float = 1.0,
     seed: int = 0,
     pair_options: Sequence[dict[str, Any] | None] | None = None,
+    on_error: str = "return",
     **options: Any,
-) -> list[tuple[NDArray[np.float64], RansacInfo]]:
+) -> list[tuple[NDArray[np.float64], RansacInfo] | PairError]:
     """:func:`estimate_homography` over many image pairs, in parallel in Rust (rayon; the GIL
     is released; ``RAYON_NUM_THREADS`` caps the threads). Each pair gets the same options and
     seed, so each result equals the single-pair call's, unless ``pair_options`` (one dict or
     ``None`` per pair) overrides some for a pair. ``quality`` is a list, one ``(N_i,)`` array per
-    pair. Invalid input in any pair raises ``ValueError`` naming the pair.
+    pair. A pair with invalid input gets a :class:`PairError` naming it in its place and the
+    other pairs their results; ``on_error="raise"`` raises its ``ValueError`` instead. A pair
+    with too few correspondences is a no-model result (``info.num_inliers == 0``, NaN model).
 
     Example:
         >>> import numpy as np, affcorr
@@ -313,10 +380,11 @@ def estimate_homography_batch(
         >>> [int(info.num_inliers) for _, info in out]
         [100, 100, 100]
     """
+    _check_on_error(on_error)
     out = _native.estimate_homography_batch(
         corrs, threshold=threshold, seed=seed, pair_options=pair_options, **options
     )
-    return [(h, _info(i)) for h, i in out]
+    return _per_pair(out, lambda r: (r[0], _info(r[1])), on_error)
 
 
 def estimate_fundamental_batch(
@@ -325,11 +393,13 @@ def estimate_fundamental_batch(
     threshold: float = 1.0,
     seed: int = 0,
     pair_options: Sequence[dict[str, Any] | None] | None = None,
+    on_error: str = "return",
     **options: Any,
-) -> list[tuple[NDArray[np.float64], RansacInfo]]:
+) -> list[tuple[NDArray[np.float64], RansacInfo] | PairError]:
     """:func:`estimate_fundamental` over many image pairs, in parallel in Rust (GIL released).
 
-    Options (and ``pair_options``) as in :func:`estimate_homography_batch`.
+    Options (and ``pair_options``, ``on_error``, the per-pair results) as in
+    :func:`estimate_homography_batch`.
 
     Example:
         >>> import numpy as np, affcorr
@@ -338,10 +408,11 @@ def estimate_fundamental_batch(
         >>> [len(info.inliers) for _, info in affcorr.estimate_fundamental_batch(pairs)]
         [50, 50]
     """
+    _check_on_error(on_error)
     out = _native.estimate_fundamental_batch(
         corrs, threshold=threshold, seed=seed, pair_options=pair_options, **options
     )
-    return [(f, _info(i)) for f, i in out]
+    return _per_pair(out, lambda r: (r[0], _info(r[1])), on_error)
 
 
 def estimate_relative_pose_batch(
@@ -352,8 +423,9 @@ def estimate_relative_pose_batch(
     threshold: float = 1.0,
     seed: int = 0,
     pair_options: Sequence[dict[str, Any] | None] | None = None,
+    on_error: str = "return",
     **options: Any,
-) -> list[tuple[RelativePose, RansacInfo]]:
+) -> list[tuple[RelativePose, RansacInfo] | PairError]:
     """:func:`estimate_relative_pose` over many image pairs, in parallel in Rust (GIL released).
 
     Args:
@@ -363,6 +435,8 @@ def estimate_relative_pose_batch(
         threshold, seed, **options: as in :func:`estimate_relative_pose`, shared by the pairs
             (``quality``: one array per pair).
         pair_options: one dict (or ``None``) per pair overriding the shared options.
+        on_error: ``"return"`` (a :class:`PairError` in a failed pair's place, as in
+            :func:`estimate_homography_batch`; an invalid per-pair K too) or ``"raise"``.
 
     Example:
         >>> import numpy as np, affcorr
@@ -377,7 +451,8 @@ def estimate_relative_pose_batch(
         >>> [(pose.t.round(6) + 0.0).tolist() for pose, _ in out]
         [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
     """
+    _check_on_error(on_error)
     out = _native.estimate_relative_pose_batch(
         corrs, K1, K2, threshold=threshold, seed=seed, pair_options=pair_options, **options
     )
-    return [(_pose(m), _info(i)) for m, i in out]
+    return _per_pair(out, lambda r: (_pose(r[0]), _info(r[1])), on_error)

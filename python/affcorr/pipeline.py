@@ -48,8 +48,16 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _native
-from .estimation import RansacInfo, RelativePose, _info, _pose
-from .shape import bundled_shape_model, find_ort_library
+from .estimation import (
+    PairError,
+    RansacInfo,
+    RelativePose,
+    _check_on_error,
+    _info,
+    _per_pair,
+    _pose,
+)
+from .shape import _PerProcess, bundled_shape_model, find_ort_library
 
 __all__ = [
     "DEFAULT_DENSE_MATCHES",
@@ -243,7 +251,7 @@ class Pipeline:
         needs = _NEEDS[matcher]
         self._models = {**{k: paths[k] for k in needs}, "shape": shape}
         model_args = {f"{k}_model": str(paths[k]) for k in needs}
-        self._runner = _native.PipelineRunner(
+        args = dict(
             matcher=matcher,
             shape_model=str(shape),
             **model_args,
@@ -258,6 +266,14 @@ class Pipeline:
             view_budget=view_budget,
             max_views=_positive(max_views, "max_views"),
         )
+        # The models and thread pools belong to this process; a forked child (multiprocessing
+        # "fork", DataLoader workers) loads its own on first use.
+        self._native = _PerProcess(lambda: _native.PipelineRunner(**args))
+
+    @property
+    def _runner(self) -> Any:
+        """The native pipeline of this process (rebuilt in a forked child)."""
+        return self._native.get()
 
     # ----------------------------------------------------------------- properties
 
@@ -323,19 +339,28 @@ class Pipeline:
         """The ACs of an image pair (paths or arrays)."""
         return MatchResult(*self._runner.match_pair(self._image(image_a), self._image(image_b)))
 
-    def match_pairs(self, pairs: Iterable[Sequence[ImageLike]]) -> list[MatchResult]:
+    def match_pairs(
+        self, pairs: Iterable[Sequence[ImageLike]], *, on_error: str = "return"
+    ) -> list[MatchResult | PairError]:
         """:meth:`match_pair` over many ``(image_a, image_b)`` pairs, in Rust with the GIL
-        released. With ``threads > 1`` the pairs run in parallel, one per thread, each on a
-        single-threaded copy of the models (loaded on the first call and kept): 12-20 % more
-        pairs per second than one pair after the other with every thread
-        (benches/results/pipeline_timing.md). Results equal :meth:`match_pair`'s. The first
-        failing pair raises, naming its index (``pairs[i]: ...``)."""
+        released. With ``threads > 1`` the pairs run in parallel, one per thread (at most one
+        per core), each on a single-threaded copy of the models (loaded on the first call and
+        kept): 12-20 % more pairs per second than one pair after the other with every thread
+        (benches/results/pipeline_timing.md). Results equal :meth:`match_pair`'s.
+
+        Each pair gets its result: a :class:`MatchResult`, or a :class:`affcorr.PairError` in
+        its place when that pair fails (an unreadable or missing image, an image too large for
+        the matcher): ``error`` is the exception :meth:`match_pair` would raise, its message
+        prefixed ``pairs[i]: ``. The other pairs are kept. ``on_error="raise"`` raises the first
+        failing pair's exception instead. An item that is not a pair raises either way. Ctrl-C
+        starts no further pair and raises ``KeyboardInterrupt`` once the running ones end."""
+        _check_on_error(on_error)
         items = []
         for i, p in enumerate(pairs):
             if isinstance(p, (str, bytes, os.PathLike, np.ndarray)) or len(p) != 2:
                 raise ValueError(f"pairs[{i}] must be a pair (image_a, image_b)")
             items.append((self._image(p[0]), self._image(p[1])))
-        return [MatchResult(*r) for r in self._runner.match_pairs(items)]
+        return _per_pair(self._runner.match_pairs(items), lambda r: MatchResult(*r), on_error)
 
     # ----------------------------------------------------------------- estimation
 

@@ -24,7 +24,8 @@ import importlib.util
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Union
+from collections.abc import Callable
+from typing import Any, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -45,6 +46,30 @@ __all__ = [
 #: An image: a PNG/JPEG file path, or an array (H, W) / (H, W, C), C in 1..4, of dtype uint8
 #: (divided by 255), uint16 (divided by 65535) or float (values in [0, 1]).
 ImageLike = Union[str, "os.PathLike[str]", np.ndarray]
+
+#: Native runners a forked child inherited from its parent. They are kept, never dropped:
+#: dropping one would wait for its ONNX Runtime and rayon threads, which did not survive the
+#: fork (docs/reliability.md, "Fork").
+_INHERITED: list[Any] = []
+
+
+class _PerProcess:
+    """A native object (ONNX Runtime sessions, thread pools) that belongs to the process that
+    built it: after ``fork()`` the child's first use builds its own from the same arguments,
+    instead of waiting forever on the parent's threads (the child has none of them)."""
+
+    def __init__(self, make: Callable[[], Any]) -> None:
+        self._make = make
+        self._obj = make()
+        self._pid = os.getpid()
+
+    def get(self) -> Any:
+        if self._pid != os.getpid():
+            _INHERITED.append(self._obj)
+            self._obj = self._make()
+            self._pid = os.getpid()
+        return self._obj
+
 
 _LIBRARY_PATTERNS = ("libonnxruntime.so*", "libonnxruntime*.dylib", "onnxruntime.dll")
 
@@ -124,14 +149,20 @@ class ShapeEstimator:
         batch_size: int = 512,
     ) -> None:
         path = bundled_shape_model() if model is None else Path(os.fspath(model))
-        if threads is not None and (not isinstance(threads, int) or threads < 1):
-            raise ValueError(f"threads must be a positive int or None, got {threads!r}")
-        if not isinstance(batch_size, int) or batch_size < 1:
-            raise ValueError(f"batch_size must be a positive int, got {batch_size!r}")
+        # threads and batch_size (Python or numpy ints) are checked in Rust: 1 to 1024 threads,
+        # 1 to 65536 pairs per run; each error names the option and the bound.
         self._model_path = path
-        self._runner = _native.ShapeRunner(
-            str(path), ort_library=find_ort_library(), threads=threads, batch_size=batch_size
+        library = find_ort_library()
+        self._native = _PerProcess(
+            lambda: _native.ShapeRunner(
+                str(path), ort_library=library, threads=threads, batch_size=batch_size
+            )
         )
+
+    @property
+    def _runner(self) -> Any:
+        """The native runner of this process (rebuilt in a forked child)."""
+        return self._native.get()
 
     @property
     def model_path(self) -> Path:

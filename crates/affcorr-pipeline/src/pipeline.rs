@@ -10,6 +10,7 @@ use affcorr_image::{
     AffineRefineOptions, AffineWarp, GrayImage, RgbImage, ac_from_views, ac_to_original,
     extract_named, limit_side, refine_affine, warp_image,
 };
+use affcorr_ransac::options::Cancel;
 use affcorr_ransac::problems::relpose::PoseModel;
 use affcorr_ransac::{
     Correspondences, Estimate, EstimatorOptions, SamplerKind, estimate_fundamental,
@@ -150,13 +151,15 @@ impl Pipeline {
         self.pool.install(|| self.match_inner(a, b))
     }
 
-    /// [`Self::match_pair`] over many pairs; one result per pair, in order.
+    /// [`Self::match_pair`] over many pairs; one result per pair, in order. A pair that fails
+    /// (an unreadable image, too small for the matcher, ...) gets its error; the other pairs
+    /// are unaffected.
     ///
     /// With `threads` > 1 the pairs run in parallel, one per thread, each on a single-threaded
     /// copy of the pipeline (ONNX Runtime and rayon with one thread; the copies are loaded on
-    /// the first call and kept). On 2 cores shared with other work this gave 12–20 % more pairs
-    /// per second than pairs one after the other with every thread per pair
-    /// (benches/results/pipeline_timing.md). The results equal [`Self::match_pair`]'s.
+    /// the first call and kept; at most one per core). On 2 cores shared with other work this
+    /// gave 12–20 % more pairs per second than pairs one after the other with every thread per
+    /// pair (benches/results/pipeline_timing.md). The results equal [`Self::match_pair`]'s.
     pub fn match_pairs<'a, A, B>(
         &self,
         pairs: impl IntoIterator<Item = (A, B)>,
@@ -165,13 +168,34 @@ impl Pipeline {
         A: Into<ImageSource<'a>>,
         B: Into<ImageSource<'a>>,
     {
+        self.match_pairs_until(pairs, &Cancel::new())
+            .into_iter()
+            .map(|r| r.expect("nothing cancels this call"))
+            .collect()
+    }
+
+    /// [`Self::match_pairs`] that stops starting pairs once `cancel` is set: each pair gets
+    /// `Some(result)`, or `None` when it was not started because of the cancellation (the pairs
+    /// already running finish).
+    pub fn match_pairs_until<'a, A, B>(
+        &self,
+        pairs: impl IntoIterator<Item = (A, B)>,
+        cancel: &Cancel,
+    ) -> Vec<Option<Result<Matches>>>
+    where
+        A: Into<ImageSource<'a>>,
+        B: Into<ImageSource<'a>>,
+    {
         let pairs: Vec<(ImageSource<'a>, ImageSource<'a>)> = pairs
             .into_iter()
             .map(|(a, b)| (a.into(), b.into()))
             .collect();
-        let workers = if self.threads > 1 && pairs.len() > 1 {
+        // More copies than cores only cost memory (each holds every model).
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        let copies = self.threads.min(cores);
+        let workers = if copies > 1 && pairs.len() > 1 {
             match self.workers.get_or_init(|| {
-                (0..self.threads)
+                (0..copies)
                     .map(|_| self.config.clone().threads(1).build())
                     .collect::<Result<Vec<_>>>()
                     .map_err(|e| e.to_string())
@@ -185,7 +209,7 @@ impl Pipeline {
         if workers.is_empty() {
             return pairs
                 .into_iter()
-                .map(|(a, b)| self.match_pair(a, b))
+                .map(|(a, b)| (!cancel.is_cancelled()).then(|| self.match_pair(a, b)))
                 .collect();
         }
         let next = AtomicUsize::new(0);
@@ -198,7 +222,7 @@ impl Pipeline {
                     let (next, pairs) = (&next, &pairs);
                     scope.spawn(move || {
                         let mut done = Vec::new();
-                        loop {
+                        while !cancel.is_cancelled() {
                             let i = next.fetch_add(1, Ordering::Relaxed);
                             let Some(&(a, b)) = pairs.get(i) else { break };
                             done.push((i, w.match_pair(a, b)));
@@ -214,9 +238,6 @@ impl Pipeline {
             }
         });
         results
-            .into_iter()
-            .map(|r| r.expect("every pair is matched"))
-            .collect()
     }
 
     /// The homography p2 ~ H p1 (original pixels) of an image pair: [`Self::match_pair`], then

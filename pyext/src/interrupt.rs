@@ -1,0 +1,97 @@
+//! How the bindings run Rust work: on a per-process thread pool (fork safety) and so that
+//! Ctrl-C interrupts it (docs/reliability.md, "Fork" and "Ctrl-C").
+//!
+//! - **Fork.** rayon's global pool is created once per process; a child started by `fork()`
+//!   inherits the pool's state but not its threads, so its first parallel call waits forever
+//!   for workers that do not exist. Every parallel call of the bindings therefore runs in
+//!   [`pool`], a pool that belongs to the process that built it: when `std::process::id()`
+//!   differs (a forked child), a new pool is built and the parent's is leaked (dropping it
+//!   would wait for its threads, which the child does not have).
+//! - **Ctrl-C.** [`interruptible`] runs the work on a worker thread while the calling thread,
+//!   with the GIL released, waits for it in slices of [`POLL`]; between slices it takes the GIL
+//!   and runs `Python::check_signals`. When that raises (KeyboardInterrupt from SIGINT, or
+//!   whatever a signal handler raises), the [`Cancel`] flag is set, the worker is awaited (the
+//!   estimators stop at their next iteration, batches start no further pair) and the handler's
+//!   exception is returned unchanged.
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use affcorr::ransac::options::Cancel;
+use pyo3::prelude::*;
+use rayon::ThreadPool;
+
+/// How long the waiting thread sleeps between signal checks.
+pub const POLL: Duration = Duration::from_millis(20);
+
+/// The process's pool and the process it belongs to.
+static POOL: Mutex<Option<(u32, Arc<ThreadPool>)>> = Mutex::new(None);
+
+/// The thread pool of this process (`RAYON_NUM_THREADS` threads, else one per core), built
+/// on first use and rebuilt in a forked child.
+pub fn pool() -> Arc<ThreadPool> {
+    let pid = std::process::id();
+    let mut slot = POOL.lock().unwrap_or_else(|p| p.into_inner());
+    if let Some((owner, pool)) = slot.as_ref()
+        && *owner == pid
+    {
+        return pool.clone();
+    }
+    // The parent's pool (if any): its threads did not survive the fork, so it must not be
+    // dropped (that would wait for them); leak it.
+    if let Some((_, inherited)) = slot.take() {
+        std::mem::forget(inherited);
+    }
+    let pool = Arc::new(
+        rayon::ThreadPoolBuilder::new()
+            .thread_name(|i| format!("affcorr-{i}"))
+            .build()
+            .expect("cannot start the thread pool"),
+    );
+    *slot = Some((pid, pool.clone()));
+    pool
+}
+
+/// Runs `f` on [`pool`] with the GIL released: for short calls, which need fork safety but
+/// not interruption.
+pub fn parallel<T: Send>(py: Python<'_>, f: impl FnOnce() -> T + Send) -> T {
+    let pool = pool();
+    py.detach(|| pool.install(f))
+}
+
+/// Runs `f(cancel)` on [`pool`] with the GIL released, checking for signals every [`POLL`];
+/// see the module docs. `f` must return soon after `cancel` is set.
+pub fn interruptible<T: Send>(py: Python<'_>, f: impl FnOnce(&Cancel) -> T + Send) -> PyResult<T> {
+    let cancel = Cancel::new();
+    let pool = pool();
+    let caller = std::thread::current();
+    std::thread::scope(|scope| {
+        let cancel_ref = &cancel;
+        let worker = scope.spawn(move || {
+            // Wakes the caller when the work ends, panics included.
+            struct Wake(std::thread::Thread);
+            impl Drop for Wake {
+                fn drop(&mut self) {
+                    self.0.unpark();
+                }
+            }
+            let _wake = Wake(caller);
+            pool.install(|| f(cancel_ref))
+        });
+        while !worker.is_finished() {
+            py.detach(|| std::thread::park_timeout(POLL));
+            if worker.is_finished() {
+                break;
+            }
+            if let Err(e) = py.check_signals() {
+                cancel.cancel();
+                let _ = py.detach(|| worker.join());
+                return Err(e);
+            }
+        }
+        match worker.join() {
+            Ok(out) => Ok(out),
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    })
+}
