@@ -7,13 +7,14 @@
 //!   [`pool`], a pool that belongs to the process that built it: when `std::process::id()`
 //!   differs (a forked child), a new pool is built and the parent's is leaked (dropping it
 //!   would wait for its threads, which the child does not have).
-//! - **Ctrl-C.** [`interruptible`] runs the work on a worker thread while the calling thread,
-//!   with the GIL released, waits for it in slices of [`POLL`]; between slices it takes the GIL
+//! - **Ctrl-C.** [`interruptible`] runs the work as a job of [`pool`] while the calling
+//!   thread, with the GIL released, waits for it in slices of [`POLL`]; between slices it takes the GIL
 //!   and runs `Python::check_signals`. When that raises (KeyboardInterrupt from SIGINT, or
 //!   whatever a signal handler raises), the [`Cancel`] flag is set, the worker is awaited (the
 //!   estimators stop at their next iteration, batches start no further pair) and the handler's
 //!   exception is returned unchanged.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
@@ -64,34 +65,52 @@ pub fn parallel<T: Send>(py: Python<'_>, f: impl FnOnce() -> T + Send) -> T {
 pub fn interruptible<T: Send>(py: Python<'_>, f: impl FnOnce(&Cancel) -> T + Send) -> PyResult<T> {
     let cancel = Cancel::new();
     let pool = pool();
+    let done = AtomicBool::new(false);
+    let out: Mutex<Option<std::thread::Result<T>>> = Mutex::new(None);
     let caller = std::thread::current();
-    std::thread::scope(|scope| {
-        let cancel_ref = &cancel;
-        let worker = scope.spawn(move || {
-            // Wakes the caller when the work ends, panics included.
-            struct Wake(std::thread::Thread);
-            impl Drop for Wake {
-                fn drop(&mut self) {
-                    self.0.unpark();
-                }
-            }
-            let _wake = Wake(caller);
-            pool.install(|| f(cancel_ref))
+    let mut interrupted = None;
+    // The work runs as a job of the pool (no thread to start per call); this thread waits,
+    // and the scope's end waits for the job in every case.
+    pool.in_place_scope(|scope| {
+        let (cancel, done, out) = (&cancel, &done, &out);
+        scope.spawn(move |_| {
+            // Panics are carried back and resumed on the calling thread.
+            let r = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(cancel)));
+            *out.lock().unwrap_or_else(|p| p.into_inner()) = Some(r);
+            done.store(true, Ordering::Release);
+            caller.unpark();
         });
-        while !worker.is_finished() {
-            py.detach(|| std::thread::park_timeout(POLL));
-            if worker.is_finished() {
+        while !done.load(Ordering::Acquire) {
+            py.detach(|| {
+                if !done.load(Ordering::Acquire) {
+                    std::thread::park_timeout(POLL);
+                }
+            });
+            if done.load(Ordering::Acquire) {
                 break;
             }
             if let Err(e) = py.check_signals() {
                 cancel.cancel();
-                let _ = py.detach(|| worker.join());
-                return Err(e);
+                interrupted = Some(e);
+                break;
             }
         }
-        match worker.join() {
-            Ok(out) => Ok(out),
-            Err(panic) => std::panic::resume_unwind(panic),
-        }
-    })
+        // Leaving the scope waits for the job (promptly, once cancelled): without the GIL.
+        py.detach(|| {
+            while !done.load(Ordering::Acquire) {
+                std::thread::park_timeout(POLL);
+            }
+        });
+    });
+    if let Some(e) = interrupted {
+        return Err(e);
+    }
+    let r = out
+        .into_inner()
+        .unwrap_or_else(|p| p.into_inner())
+        .expect("the job ran");
+    match r {
+        Ok(v) => Ok(v),
+        Err(panic) => std::panic::resume_unwind(panic),
+    }
 }
