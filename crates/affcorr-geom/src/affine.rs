@@ -142,16 +142,35 @@ pub fn decompose(a: &Mat2, index: usize) -> Result<AffineShape> {
     let scale = scale_hat / r;
     let m = a_hat / scale_hat;
     let orientation = (-m[(0, 1)]).atan2(m[(1, 1)]);
-    let inv_a = (m[(0, 1)] * m[(0, 1)] + m[(1, 1)] * m[(1, 1)]).sqrt();
+    // For a nearly singular A (det Â down to 5e-324), M's entries reach ~1e162: the squares
+    // then leave f64's range, and hypot (which cannot) takes over; ordinary A keep their bits.
+    let norm_sq = m[(0, 1)] * m[(0, 1)] + m[(1, 1)] * m[(1, 1)];
+    let inv_a = if norm_sq.is_normal() {
+        norm_sq.sqrt()
+    } else {
+        m[(0, 1)].hypot(m[(1, 1)])
+    };
     // a = 1/‖m_{:,2}‖ exactly; A′'s (0,0) entry recomputed from M would carry rounding.
     let diag0 = 1.0 / inv_a;
     // A′ = R(−θ) M with (−sin θ, cos θ) = m_{:,2} / ‖m_{:,2}‖, so its (1,0) entry is
     // −sin θ·m₁₁ + cos θ·m₂₁ = (m₁₂ m₁₁ + m₂₂ m₂₁) / ‖m_{:,2}‖: no sin/cos of θ needed.
-    let b = (m[(0, 1)] * m[(0, 0)] + m[(1, 1)] * m[(1, 0)]) * diag0;
+    let mut b = (m[(0, 1)] * m[(0, 0)] + m[(1, 1)] * m[(1, 0)]) * diag0;
+    if !b.is_finite() {
+        // The products overflowed: the unit vector first (its entries are at most 1).
+        b = (m[(0, 1)] / inv_a) * m[(0, 0)] + (m[(1, 1)] / inv_a) * m[(1, 0)];
+    }
+    let residual_shape = [diag0 - 1.0, b, inv_a - 1.0];
+    if !(scale.is_finite() && residual_shape.iter().all(|v| v.is_finite())) {
+        return Err(GeomError::Overflow {
+            what: "A",
+            index,
+            reason: "its scale or shape A′ is beyond 1.8e308",
+        });
+    }
     Ok(AffineShape {
         orientation,
         scale,
-        residual_shape: [diag0 - 1.0, b, inv_a - 1.0],
+        residual_shape,
     })
 }
 

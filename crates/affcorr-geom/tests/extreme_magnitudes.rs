@@ -179,3 +179,32 @@ fn the_issue_examples() {
         Err(GeomError::Overflow { index: 3, .. })
     ));
 }
+
+/// Found by the `geom_scale` fuzz target: a nearly singular A (det Â a subnormal) made
+/// M = Â/√det Â reach ~1e162, whose squares underflowed or overflowed: an infinite or NaN
+/// orientation and shape. Its A′ is representable, so it must decompose finitely.
+#[test]
+fn nearly_singular_maps_decompose_to_finite_shapes() {
+    let cases = [
+        Mat2::new(1.0, 0.0, 0.0, 5e-324),
+        Mat2::new(5e-324, 0.0, 0.0, 1.0),
+        Mat2::new(1.0, 1.0, 0.0, 1e-310),
+        Mat2::new(1e-310, 1.0, -1.0, 1e-310),
+        Mat2::new(1.0, 1.0, 1.0 - 1e-16, 1.0) * 1e300,
+    ];
+    for m in cases {
+        match decompose(&m, 0) {
+            Ok(s) => {
+                assert!(
+                    s.orientation.is_finite() && s.residual_shape.iter().all(|v| v.is_finite()),
+                    "{s:?} of {m}"
+                );
+                assert!(s.scale.is_finite() && s.scale > 0.0);
+            }
+            Err(e) => assert!(
+                matches!(e, GeomError::NonPositiveDeterminant { .. }),
+                "{e}: {m}"
+            ),
+        }
+    }
+}
