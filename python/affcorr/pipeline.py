@@ -182,7 +182,7 @@ class Pipeline:
             the view's warp; ``"full"`` tries every view and keeps the best; ``"off"`` the
             plain pair only. Easy pairs cost one verification. See :attr:`MatchResult.views`.
         view_budget: seconds after which the cascade starts no new view (None: no limit).
-        max_views: at most this many synthetic views (None: the default, 32).
+        max_views: at most this many synthetic views (None: the default, 64).
         refine_affine: refine the network's ACs against the images by affine Lucas-Kanade
             (:func:`affcorr.refine_affine` with its defaults; x2 moves too). On by default; its
             effect is measured in benches/results/eval/affine.md and

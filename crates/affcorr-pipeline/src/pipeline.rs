@@ -66,6 +66,9 @@ pub struct Pipeline {
     pub(crate) workers: OnceLock<std::result::Result<Vec<Pipeline>, String>>,
 }
 
+/// At most this many views guided by the ACs of earlier views, per pair.
+const MAX_GUIDED_VIEWS: usize = 3;
+
 /// ACs of two (working or view) images, before the map back to the original pixels.
 struct WorkMatches {
     corrs: Vec<[f64; 8]>,
@@ -442,14 +445,19 @@ impl Pipeline {
             .filter(|(_, m)| **m)
             .map(|(r, _)| *r)
             .collect();
-        let mut queue: Vec<ViewSpec> = guided_view(&inlier_acs).into_iter().collect();
+        let mut queue: std::collections::VecDeque<ViewSpec> =
+            guided_view(&inlier_acs).into_iter().collect();
         queue.extend(candidate_views());
-        queue.truncate(o.max_views);
         let (mut best, mut best_inliers) = (plain, if verified { inliers } else { 0 });
-        for view in queue {
-            if o.time_budget.is_some_and(|b| start.elapsed() >= b) {
+        // A view whose matches partly agree (too few to verify) guides the next one: the
+        // dominant map of its agreeing ACs, in the original images, is undone first.
+        let (mut guide_inliers, mut guided) = (inlier_acs.len(), 0);
+        let mut tried = 0;
+        while let Some(view) = queue.pop_front() {
+            if tried >= o.max_views || o.time_budget.is_some_and(|b| start.elapsed() >= b) {
                 break;
             }
+            tried += 1;
             let t = Instant::now();
             let (a_warp, b_warp) = match view.image {
                 ViewImage::A => (
@@ -488,8 +496,20 @@ impl Pipeline {
                 .iter()
                 .filter_map(|row| ac_from_views(row, &wa, &wb))
                 .collect();
-            let (inliers, _) = verify(&corrs)?;
+            let (inliers, mask) = verify(&corrs)?;
             let verified = passes(inliers, corrs.len());
+            if !verified && inliers > guide_inliers && guided < MAX_GUIDED_VIEWS {
+                let agreeing: Vec<[f64; 8]> = corrs
+                    .iter()
+                    .zip(&mask)
+                    .filter(|(_, m)| **m)
+                    .map(|(r, _)| *r)
+                    .collect();
+                if let Some(g) = guided_view(&agreeing) {
+                    queue.push_front(g);
+                    (guide_inliers, guided) = (inliers, guided + 1);
+                }
+            }
             reports.push(ViewReport {
                 view,
                 matches: corrs.len(),

@@ -21,7 +21,8 @@
 //!    - in-plane **rotations** of B by 90°, 270°, 180° (the matchers hold up to about ±45°),
 //!      **zooms** of A or B by ½, the diagonal rotations, then zooms by ¼ (the matcher's
 //!      keypoint budget lands on the overlap);
-//!    - **tilts** t = 2 (4 directions) and t = 4 (8 directions) of A, then of B.
+//!    - **tilts** t = 2 (4 directions) and t = 4 (8 directions) of A, then of B; then t = 4
+//!      (8 directions) of A rotated by 90°, 270° and 180° (a steep tilt of a rotated pair).
 //! 3. Every AC of a view is mapped back to the original images with its A composed with the
 //!    synthetic warp ([`affcorr_image::ac_from_views`]), so the ACs are correct in the
 //!    original pixels whichever view produced them.
@@ -108,7 +109,7 @@ impl Default for ViewOptions {
         Self {
             mode: defaults::VIEWS,
             time_budget: None,
-            max_views: 32,
+            max_views: 64,
             min_inliers: defaults::VIEW_MIN_INLIERS,
             min_inlier_ratio: defaults::VIEW_MIN_INLIER_RATIO,
         }
@@ -259,6 +260,12 @@ pub fn candidate_views() -> Vec<ViewSpec> {
             }
         }
     }
+    // Steep tilts of a rotated pair: the matcher needs both undone at once.
+    for r in [90.0, 270.0, 180.0] {
+        for k in 0..8 {
+            v.push(ViewSpec::param(A, r, 1.0, 4.0, 22.5 * k as f64));
+        }
+    }
     v
 }
 
@@ -351,11 +358,11 @@ mod tests {
     #[test]
     fn candidates_cover_rotation_zoom_and_tilt_without_repeats() {
         let v = candidate_views();
-        assert_eq!(v.len(), 7 + 4 + 8 + 16);
+        assert_eq!(v.len(), 7 + 4 + 8 + 16 + 24);
         let labels: std::collections::BTreeSet<String> = v.iter().map(|s| s.label()).collect();
         assert_eq!(labels.len(), v.len());
         assert!(labels.contains("B rot 90°") && labels.contains("A zoom 0.25"));
-        assert!(labels.contains("B tilt 4 @157.5°"));
+        assert!(labels.contains("B tilt 4 @157.5°") && labels.contains("A rot 90° tilt 4 @22.5°"));
     }
 
     #[test]
