@@ -116,6 +116,7 @@ fn options(r: &mut Reader, n: usize) -> EstimatorOptions {
         lo_iterations: usize::from(r.u8() % 12),
         final_refinement: r.bool(),
         sprt: r.bool(),
+        ..Default::default()
     };
     let sample = match r.u8() % 3 {
         0 => None,
