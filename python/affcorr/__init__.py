@@ -51,6 +51,7 @@ from ._native import (
 )
 from .estimation import (
     ESTIMATOR_OPTIONS,
+    PairError,
     RansacInfo,
     RelativePose,
     estimate_fundamental,
@@ -73,6 +74,7 @@ from .shape import (
 __all__ = [
     "__version__",
     "ESTIMATOR_OPTIONS",
+    "PairError",
     "RansacInfo",
     "RelativePose",
     "estimate_fundamental",

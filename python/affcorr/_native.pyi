@@ -309,7 +309,13 @@ def refine_affine(
 
 # --- end-to-end pipeline (wrapped by affcorr.pipeline) -------------------------------------------
 
-_MatchTuple = tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]
+_MatchTuple = tuple[
+    NDArray[np.float64],
+    NDArray[np.float64],
+    dict[str, float],
+    tuple[int, int],
+    list[dict[str, Any]],
+]
 
 #: The pipeline's one set of defaults (affcorr-pipeline's `defaults` module).
 PIPELINE_DEFAULTS: dict[str, Any]
@@ -344,6 +350,9 @@ class PipelineRunner:
         threads: int | None = None,
         seed: int | None = None,
         refine_affine: bool = ...,
+        views: str | None = None,
+        view_budget: float | None = None,
+        max_views: int | None = None,
     ) -> PipelineRunner: ...
     def estimate(
         self,
@@ -360,21 +369,16 @@ class PipelineRunner:
         "relative_pose" ((R, t, E, F); K1, K2 checked before matching): the Rust Pipeline's
         estimators with estimate_*'s keyword options; threshold None is the pipeline's default;
         GIL released."""
-    def match_pair(
-        self, image_a: Any, image_b: Any
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]:
+    def match_pair(self, image_a: Any, image_b: Any) -> _MatchTuple:
         """Images (path or array) -> (corrs (N, 8), certainty (N,), timings {stage: seconds},
-        (keypoints in A, keypoints in B)); GIL released."""
-    def match_pairs(
-        self, pairs: Sequence[tuple[Any, Any]]
-    ) -> list[
-        tuple[NDArray[np.float64], NDArray[np.float64], dict[str, float], tuple[int, int]]
-        | Exception
-    ]:
+        (keypoints in A, keypoints in B), views [report per view]); GIL released."""
+    def match_pairs(self, pairs: Sequence[tuple[Any, Any]]) -> list[_MatchTuple | Exception]:
         """match_pair over the pairs, in parallel on single-threaded copies of the models when
         threads > 1; a failing pair is its exception ("pairs[i]: ...") in its place."""
     @property
     def matcher(self) -> str: ...
+    @property
+    def views(self) -> str: ...
     @property
     def max_keypoints(self) -> int: ...
     @property

@@ -48,6 +48,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _native
+from ._images import as_rgb
 from .estimation import (
     PairError,
     RansacInfo,
@@ -183,6 +184,8 @@ class Pipeline:
             plain pair only. Easy pairs cost one verification. See :attr:`MatchResult.views`.
         view_budget: seconds after which the cascade starts no new view (None: no limit).
         max_views: at most this many synthetic views (None: the default, 64).
+        channel_order: ``"bgr"`` for ``cv2.imread`` arrays (files are decoded by their own
+            format; torch tensors ``(C, H, W)`` are accepted).
         refine_affine: refine the network's ACs against the images by affine Lucas-Kanade
             (:func:`affcorr.refine_affine` with its defaults; x2 moves too). On by default; its
             effect is measured in benches/results/eval/affine.md and
@@ -216,7 +219,10 @@ class Pipeline:
         views: str = _D["views"],
         view_budget: float | None = None,
         max_views: int | None = None,
+        channel_order: str = "rgb",
     ) -> None:
+        as_rgb("", channel_order)  # validates it
+        self._channel_order = channel_order
         if matcher is None:
             matcher = "dense" if dense_model is not None else _D["matcher"]
         if not isinstance(matcher, str) or matcher.lower() not in MATCHERS:
@@ -331,8 +337,8 @@ class Pipeline:
 
     # ----------------------------------------------------------------- matching
 
-    @staticmethod
-    def _image(x: Any) -> Any:
+    def _image(self, x: Any) -> Any:
+        x = as_rgb(x, self._channel_order)
         return os.fspath(x) if isinstance(x, os.PathLike) else x
 
     def match_pair(self, image_a: ImageLike, image_b: ImageLike) -> MatchResult:

@@ -22,15 +22,16 @@ from __future__ import annotations
 
 import importlib.util
 import os
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from collections.abc import Callable
 from typing import Any, Union
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from . import _native
+from ._images import as_rgb, as_xy
 
 __all__ = [
     "AffineRefinement",
@@ -202,6 +203,7 @@ class ShapeEstimator:
         x2: ArrayLike,
         *,
         refine: bool = True,
+        channel_order: str = "rgb",
     ) -> NDArray[np.float64]:
         """ACs ``(N, 8)`` of the matches ``x1 (N, 2)`` in image A <-> ``x2 (N, 2)`` in image B.
 
@@ -210,15 +212,25 @@ class ShapeEstimator:
         matcher's real matches it takes the median ||A - A_gt||_F from ~0.2 to ~0.01
         (benches/results/eval/affine.md). ``refine=False`` returns the network's ACs alone
         (several times faster); :func:`refine_affine` gives the refinement's options and
-        per-AC report.
+        per-AC report. ``channel_order``: ``"bgr"`` for ``cv2.imread`` arrays (files are
+        decoded by their own format); ``x1``, ``x2`` may be OpenCV's ``(N, 1, 2)`` arrays or
+        ``cv2.KeyPoint`` lists.
         """
-        return self._runner.estimate(image_a, image_b, x1, x2, bool(refine))[0]
+        a, b = as_rgb(image_a, channel_order), as_rgb(image_b, channel_order)
+        return self._runner.estimate(a, b, as_xy(x1), as_xy(x2), bool(refine))[0]
 
     def estimate_detailed(
-        self, image_a: ImageLike, image_b: ImageLike, x1: ArrayLike, x2: ArrayLike
+        self,
+        image_a: ImageLike,
+        image_b: ImageLike,
+        x1: ArrayLike,
+        x2: ArrayLike,
+        *,
+        channel_order: str = "rgb",
     ) -> ShapeEstimate:
         """Like :meth:`estimate`, with the per-patch orientations, scales and residual shapes."""
-        return ShapeEstimate(*self._runner.estimate(image_a, image_b, x1, x2, False))
+        a, b = as_rgb(image_a, channel_order), as_rgb(image_b, channel_order)
+        return ShapeEstimate(*self._runner.estimate(a, b, as_xy(x1), as_xy(x2), False))
 
     def predict(
         self, patches_a: ArrayLike, patches_b: ArrayLike, *, return_logits: bool = False
@@ -232,10 +244,12 @@ class ShapeEstimator:
         """
         return self._runner.predict(patches_a, patches_b, return_logits)
 
-    def extract_patches(self, image: ImageLike, xy: ArrayLike) -> NDArray[np.float32]:
+    def extract_patches(
+        self, image: ImageLike, xy: ArrayLike, *, channel_order: str = "rgb"
+    ) -> NDArray[np.float32]:
         """The network's input patches ``(N, 1, 32, 32)`` around ``xy (N, 2)``; see
         :func:`extract_patches`."""
-        return _native.extract_patches(image, xy)
+        return extract_patches(image, xy, channel_order=channel_order)
 
     def __repr__(self) -> str:
         return (
@@ -244,23 +258,28 @@ class ShapeEstimator:
         )
 
 
-def extract_patches(image: ImageLike, xy: ArrayLike) -> NDArray[np.float32]:
+def extract_patches(
+    image: ImageLike, xy: ArrayLike, *, channel_order: str = "rgb"
+) -> NDArray[np.float32]:
     """32x32 patches ``(N, 1, 32, 32)`` float32 around the sub-pixel centres ``xy (N, 2)``.
 
     Pixel ``(r, c)`` of a patch is the image read bilinearly at ``(x + c - 15.5, y + r - 15.5)``;
     reads outside the image replicate its border (``scipy.ndimage.map_coordinates(order=1,
-    mode="nearest")``). Colour images are converted to gray first (:func:`read_gray_image`).
+    mode="nearest")``). Colour images are converted to gray first (:func:`read_gray_image`;
+    ``channel_order="bgr"`` for ``cv2.imread`` arrays).
     """
-    return _native.extract_patches(image, xy)
+    return _native.extract_patches(as_rgb(image, channel_order), as_xy(xy))
 
 
-def read_gray_image(image: ImageLike) -> NDArray[np.float32]:
+def read_gray_image(image: ImageLike, *, channel_order: str = "rgb") -> NDArray[np.float32]:
     """An image as the network sees it: ``(H, W)`` float32 gray in [0, 1].
 
     Files (PNG, JPEG; 8 or 16 bits) are decoded in Rust. Colour becomes
-    ``0.299 R + 0.587 G + 0.114 B``; alpha is ignored.
+    ``0.299 R + 0.587 G + 0.114 B``; alpha is ignored. ``channel_order``: ``"bgr"`` for
+    ``cv2.imread`` arrays (files are decoded by their own format); torch tensors
+    ``(C, H, W)`` are accepted.
     """
-    return _native.read_gray_image(image)
+    return _native.read_gray_image(as_rgb(image, channel_order))
 
 
 @dataclass(frozen=True)
@@ -287,6 +306,7 @@ def refine_affine(
     move_points: bool = True,
     try_identity: bool = True,
     max_shift_std: float = 0.5,
+    channel_order: str = "rgb",
 ) -> AffineRefinement:
     """Refine ACs ``(N, 8)`` against the two images by affine Lucas-Kanade (Rust, parallel,
     the GIL released).
@@ -301,7 +321,8 @@ def refine_affine(
     otherwise the input row is returned. With ``move_points`` x2 becomes
     ``x2 + t`` (A and t are fitted together); otherwise only A changes. With ``try_identity``
     the iterations start from A = I instead of the input's A wherever the identity matches
-    better at the coarsest level (most image pairs are roughly upright).
+    better at the coarsest level (most image pairs are roughly upright). ``channel_order``:
+    ``"bgr"`` for ``cv2.imread`` arrays.
 
     On graffiti 1->3 at SIFT's correct matches the median ||A - A_gt||_F goes from 0.369 (the
     shape network) to 0.023, against SIFT's own 0.311 (benches/results/shape_accuracy.md).
@@ -325,8 +346,8 @@ def refine_affine(
             f"blur_sigmas must be a sequence of numbers, got {blur_sigmas!r}"
         ) from None
     out, refined, zncc = _native.refine_affine(
-        image_a,
-        image_b,
+        as_rgb(image_a, channel_order),
+        as_rgb(image_b, channel_order),
         corrs,
         radius=radius,
         blur_sigmas=sigmas,

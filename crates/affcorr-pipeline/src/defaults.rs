@@ -17,7 +17,7 @@ use crate::views::ViewMode;
 pub const MATCHER: Matcher = Matcher::XFeatLighterGlue;
 
 /// Keypoints per image (semi-dense cells for XFeat*).
-pub const MAX_KEYPOINTS: usize = 4096;
+pub const MAX_KEYPOINTS: usize = 2048;
 
 /// Matches a dense matcher draws when `max_matches` is not set. DKM draws 10 000; each costs a
 /// shape-network evaluation and a refinement, so fewer by default.
@@ -40,13 +40,13 @@ pub const VIEW_MIN_INLIER_RATIO: f64 = 0.1;
 pub const SEED: u64 = 0;
 
 /// Inlier threshold of [`crate::Pipeline::homography`]: transfer error, pixels.
-pub const HOMOGRAPHY_THRESHOLD: f64 = 2.0;
+pub const HOMOGRAPHY_THRESHOLD: f64 = 1.0;
 
 /// Inlier threshold of [`crate::Pipeline::fundamental`]: Sampson distance, pixels.
-pub const FUNDAMENTAL_THRESHOLD: f64 = 2.0;
+pub const FUNDAMENTAL_THRESHOLD: f64 = 1.0;
 
 /// Inlier threshold of [`crate::Pipeline::relative_pose`]: Sampson distance, pixels.
-pub const POSE_THRESHOLD: f64 = 2.0;
+pub const POSE_THRESHOLD: f64 = 1.0;
 
 /// What the pipeline estimates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

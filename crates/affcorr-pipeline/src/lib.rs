@@ -53,7 +53,10 @@
 //! otherwise). With PROSAC sampling and no `quality`, the certainties are the quality.
 //! [`Geometry::default_options`] gives each geometry's default options.
 //!
-//! Every stage's wall time is in [`Timings`]. The defaults are in [`defaults`], one set for
+//! Every stage's wall time is in [`Timings`]. The pipeline emits [`tracing`](https://docs.rs/tracing)
+//! events (target `affcorr_pipeline`): `debug` per pair with its stage timings and per view of
+//! the cascade, `info` when a pair falls back to synthetic views; install a subscriber (e.g.
+//! `tracing-subscriber`) to see them. The defaults are in [`defaults`], one set for
 //! Rust, Python and the CLI.
 //!
 //! # Modules

@@ -347,6 +347,12 @@ impl Pipeline {
             .map(|row| ac_to_original(row, sa, sb))
             .collect();
         timings.total = start.elapsed();
+        tracing::debug!(
+            matcher = %self.matcher(),
+            acs = work.corrs.len(),
+            views = views.len(),
+            "matched a pair: {timings}"
+        );
         Ok(Matches {
             corrs,
             certainty: work.certainty,
@@ -438,6 +444,11 @@ impl Pipeline {
         if verified && o.mode == ViewMode::Auto {
             return Ok((plain, reports));
         }
+        tracing::info!(
+            matches = plain.corrs.len(),
+            inliers,
+            "the plain pair does not verify: trying synthetic views"
+        );
         let inlier_acs: Vec<[f64; 8]> = plain
             .corrs
             .iter()
@@ -510,6 +521,13 @@ impl Pipeline {
                     (guide_inliers, guided) = (inliers, guided + 1);
                 }
             }
+            tracing::debug!(
+                view = %view.label(),
+                matches = corrs.len(),
+                inliers,
+                verified,
+                "view cascade"
+            );
             reports.push(ViewReport {
                 view,
                 matches: corrs.len(),

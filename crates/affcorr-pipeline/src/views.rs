@@ -2,7 +2,7 @@
 //! rotation, zoom and tilt (the idea of ASIFT and MODS; Morel & Yu 2009, Mishkin et al. 2015).
 //!
 //! 1. The plain pair is matched and **verified**: a fundamental matrix from 3-AC samples
-//!    (`affcorr_ransac::estimate_fundamental` at the pipeline's F threshold) scored with the
+//!    (`affcorr_ransac::estimate_fundamental` at [`VERIFY_THRESHOLD`]) scored with the
 //!    affine Sampson error too ([`VERIFY_AFFINE_WEIGHT`]), so that a match counts only when
 //!    its point *and* its A agree with F, must have at least [`ViewOptions::min_inliers`]
 //!    such inliers making up at least [`ViewOptions::min_inlier_ratio`] of the matches. F
@@ -43,6 +43,11 @@ use crate::error::{PipelineError, Result};
 /// verification: the estimators' own weight for "the affine part is accurate too"
 /// (`affine_weight` of `affcorr_ransac::EstimatorOptions`, docs/design.md §5).
 pub const VERIFY_AFFINE_WEIGHT: f64 = 50.0;
+
+/// The Sampson threshold (px) of verification: looser than an estimate's, since a verified
+/// pair only has to be right, not precise (the thresholds of the numbers in
+/// benches/results/views.md and benches/results/eval/extreme.md).
+pub const VERIFY_THRESHOLD: f64 = 2.0;
 
 /// Whether and how the pipeline synthesises views.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -313,7 +318,7 @@ pub(crate) fn verify(corrs: &[[f64; 8]]) -> Result<(usize, Vec<bool>)> {
     }
     let data = Correspondences::from_ac_rows(corrs)?;
     let mut o = EstimatorOptions::default();
-    o.ransac.threshold = defaults::FUNDAMENTAL_THRESHOLD;
+    o.ransac.threshold = VERIFY_THRESHOLD;
     o.affine_weight = VERIFY_AFFINE_WEIGHT;
     match estimate_fundamental(&data, &o) {
         Ok(e) => Ok((e.num_inliers, e.inliers)),

@@ -12,7 +12,8 @@ use std::sync::OnceLock;
 use affcorr_geom::Mat3;
 use affcorr_image::ImageError;
 use affcorr_pipeline::{
-    EstimatorOptions, GrayImage, ImageSource, Matcher, Pipeline, PipelineError,
+    EstimatorOptions, GrayImage, ImageSource, Matcher, Pipeline, PipelineError, ViewMode,
+    ViewOptions,
 };
 use affcorr_runner::RunnerError;
 
@@ -32,11 +33,18 @@ fn models() -> PathBuf {
     common::models_dir()
 }
 
+/// The matcher at 4096 keypoints (the bounds below were measured there), without the view
+/// cascade (the tests check the matcher's own matches).
 fn pipeline(matcher: Matcher) -> Pipeline {
     common::init();
     Pipeline::builder()
         .matcher(matcher)
         .models_dir(models())
+        .max_keypoints(4096)
+        .views(ViewOptions {
+            mode: ViewMode::Off,
+            ..Default::default()
+        })
         .threads(2)
         .build()
         .unwrap()
