@@ -332,3 +332,11 @@ def test_a_pair_without_matches_gives_no_model_rather_than_an_error():
     K = np.array([[300.0, 0, 160], [0, 300, 120], [0, 0, 1]])
     pose, info = pipe.relative_pose(flat, flat, K, K)
     assert np.isnan(pose.R).all() and info.num_inliers == 0
+
+
+def test_a_too_small_image_is_named_by_the_users_size():
+    """max_side shrinks a 1000x60 image to 400x24: the message gives the user's size first."""
+    p = affcorr.Pipeline("xfeat", max_keypoints=64, max_side=400, threads=1, views="off")
+    thin = np.full((60, 1000), 0.5)
+    with pytest.raises(ValueError, match=r"image_a: 1000×60 pixels \(400×24 at the working"):
+        p.match_pair(thin, np.full((240, 320), 0.5))

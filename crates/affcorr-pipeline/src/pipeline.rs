@@ -32,15 +32,38 @@ use crate::views::{
 /// an error.
 pub const MAX_WORKING_PIXELS: usize = 64_000_000;
 
-fn check_working_size(img: &GrayImage, what: &'static str) -> Result<()> {
-    let (w, h) = (img.width(), img.height());
+/// The smallest side the XFeat matchers take at the working resolution (their input multiple).
+const MIN_WORKING_SIDE: usize = 32;
+
+/// Refuses working images the matcher cannot take, naming the user's image size (and the
+/// working one when `max_side` downscaled it).
+fn check_working_size(original: &GrayImage, work: &GrayImage, what: &'static str) -> Result<()> {
+    let (w, h) = (work.width(), work.height());
+    let size = if (w, h) == (original.width(), original.height()) {
+        format!("{w}×{h} pixels")
+    } else {
+        format!(
+            "{}×{} pixels ({w}×{h} at the working resolution after max_side)",
+            original.width(),
+            original.height()
+        )
+    };
     if w.saturating_mul(h) > MAX_WORKING_PIXELS {
         return Err(PipelineError::invalid(
             what,
             format!(
-                "{w}×{h} pixels is over the matcher's limit of {} MP at the working resolution \
+                "{size} is over the matcher's limit of {} MP at the working resolution \
                  (≈160 MB per megapixel): set max_side (e.g. 4096)",
                 MAX_WORKING_PIXELS / 1_000_000
+            ),
+        ));
+    }
+    if w.min(h) < MIN_WORKING_SIDE {
+        return Err(PipelineError::invalid(
+            what,
+            format!(
+                "{size} is too small: both sides must be at least {MIN_WORKING_SIDE} pixels \
+                 at the working resolution"
             ),
         ));
     }
@@ -326,8 +349,8 @@ impl Pipeline {
         let (work_a, sa) = limit_side(&img_a, self.max_side);
         let (work_b, sb) = limit_side(&img_b, self.max_side);
         if !dense {
-            check_working_size(&work_a, "image_a")?;
-            check_working_size(&work_b, "image_b")?;
+            check_working_size(&img_a, &work_a, "image_a")?;
+            check_working_size(&img_b, &work_b, "image_b")?;
         }
         timings.decode += elapsed(&mut t);
 
