@@ -174,6 +174,19 @@ fn type_error(name: &str, what: &str, v: &Bound<'_, PyAny>) -> PyErr {
 
 /// Builds the options from the explicit arguments and the keyword options. Unknown names are
 /// collected and reported together, with the valid names.
+/// The error for option names that are not in the table (all of them, with the valid ones).
+fn unknown_options(unknown: &[String]) -> PyResult<()> {
+    if unknown.is_empty() {
+        return Ok(());
+    }
+    Err(PyValueError::new_err(format!(
+        "unknown option{} {}; valid options: {}",
+        if unknown.len() > 1 { "s" } else { "" },
+        unknown.join(", "),
+        OPTION_NAMES.join(", ")
+    )))
+}
+
 pub(crate) fn parse_options(
     options: Option<&Bound<'_, PyDict>>,
     defaults: EstimatorOptions,
@@ -188,14 +201,7 @@ pub(crate) fn parse_options(
             }
         }
     }
-    if !unknown.is_empty() {
-        return Err(PyValueError::new_err(format!(
-            "unknown option{} {}; valid options: {}",
-            if unknown.len() > 1 { "s" } else { "" },
-            unknown.join(", "),
-            OPTION_NAMES.join(", ")
-        )));
-    }
+    unknown_options(&unknown)?;
     Ok(o)
 }
 
@@ -458,14 +464,7 @@ fn pair_options(
             unknown.push(name);
         }
     }
-    if !unknown.is_empty() {
-        return Err(PyValueError::new_err(format!(
-            "unknown option{} {}; valid options: {}",
-            if unknown.len() > 1 { "s" } else { "" },
-            unknown.join(", "),
-            OPTION_NAMES.join(", ")
-        )));
-    }
+    unknown_options(&unknown)?;
     Ok(o)
 }
 

@@ -274,8 +274,11 @@ impl Pipeline {
         image_b: impl Into<ImageSource<'a>>,
         options: &EstimatorOptions,
     ) -> Result<Estimated<Mat3>> {
-        let matches = self.match_pair(image_a, image_b)?;
-        self.estimate(matches, options, estimate_homography)
+        self.estimate(
+            self.match_pair(image_a, image_b)?,
+            options,
+            estimate_homography,
+        )
     }
 
     /// The fundamental matrix p2ᵀ F p1 = 0 (original pixels) of an image pair:
@@ -286,8 +289,11 @@ impl Pipeline {
         image_b: impl Into<ImageSource<'a>>,
         options: &EstimatorOptions,
     ) -> Result<Estimated<Mat3>> {
-        let matches = self.match_pair(image_a, image_b)?;
-        self.estimate(matches, options, estimate_fundamental)
+        self.estimate(
+            self.match_pair(image_a, image_b)?,
+            options,
+            estimate_fundamental,
+        )
     }
 
     /// The relative pose X2 = R X1 + t of two calibrated images: [`Self::match_pair`], then
