@@ -38,6 +38,7 @@ def test_an_upside_down_pair_is_solved_through_a_rotated_view(upside_down):
     assert err < 5.0, err
     assert res.view["verified"] and res.view["label"] != "plain", res.views
     assert res.views[0]["label"] == "plain" and not res.views[0]["verified"]
+    assert [v["used"] for v in res.views].count(True) == 1 and res.view["used"]
     assert res.timings["views"] > 0
     # The inliers' A against the plane's: the view's 180° turn is composed into A.
     c = res.corrs[info.inliers]

@@ -25,7 +25,7 @@ use affcorr::pipeline::defaults::{self, Geometry};
 use affcorr::pipeline::views::ViewImage;
 use affcorr::pipeline::{
     AffineRefineOptions, GrayImage, ImageSource, Matcher, Matches, Pipeline, PipelineError,
-    RgbImage, ViewOptions, ViewReport, init_ort as init, model_file,
+    RgbImage, ViewOptions, init_ort as init, model_file,
 };
 use affcorr::ransac::{
     Correspondences, Estimate, EstimatorOptions, RansacError, estimate_fundamental,
@@ -142,12 +142,14 @@ type MatchTuple<'py> = (
 
 /// The view cascade's report: one dict per view tried (`label`, `image` "A" | "B" | None,
 /// `rotation` (rad), `scale`, `tilt`, `tilt_angle` (rad), `guided`, `matches`, `inliers`,
-/// `verified`, `seconds`).
-fn view_reports<'py>(py: Python<'py>, views: &[ViewReport]) -> PyResult<Bound<'py, PyList>> {
+/// `verified`, `seconds`, and `used`: whether its ACs are the result's, `Matches::view`).
+fn view_reports<'py>(py: Python<'py>, m: &Matches) -> PyResult<Bound<'py, PyList>> {
     let out = PyList::empty(py);
-    for v in views {
+    let used = m.view();
+    for v in &m.views {
         let d = PyDict::new(py);
         d.set_item("label", v.view.label())?;
+        d.set_item("used", used.is_some_and(|u| std::ptr::eq(u, v)))?;
         let image = match v.view.image {
             ViewImage::None => None,
             ViewImage::A => Some("A"),
@@ -176,6 +178,7 @@ fn match_tuple<'py>(
     extra_decode: Duration,
 ) -> PyResult<MatchTuple<'py>> {
     let n = m.corrs.len();
+    let views = view_reports(py, &m)?;
     let mut timings = m.timings;
     timings.decode += extra_decode;
     timings.total += extra_decode;
@@ -188,7 +191,7 @@ fn match_tuple<'py>(
         to_numpy(py, &[n], m.certainty)?.into_any(),
         d,
         m.num_keypoints,
-        view_reports(py, &m.views)?,
+        views,
     ))
 }
 

@@ -112,7 +112,8 @@ class MatchResult:
         views: the view cascade's report, one dict per view tried, the plain pair first
             (``label``, ``image`` "A" / "B" / None, ``rotation`` and ``tilt_angle`` in
             radians, ``scale``, ``tilt``, ``guided``, ``matches``, ``inliers``, ``verified``,
-            ``seconds``); empty when the cascade did not run (``views="off"``, dense matchers).
+            ``seconds``, ``used``: whether its ACs are the result's); empty when the cascade
+            did not run (``views="off"``, dense matchers).
     """
 
     corrs: NDArray[np.float64]
@@ -123,12 +124,10 @@ class MatchResult:
 
     @property
     def view(self) -> dict[str, Any] | None:
-        """The view that produced the ACs: the verified one with the most inliers, else the
-        plain pair; None when the cascade did not run."""
-        verified = [v for v in self.views if v["verified"]]
-        if verified:
-            return max(verified, key=lambda v: v["inliers"])
-        return self.views[0] if self.views else None
+        """The view that produced the ACs (the report marked ``used``, as the Rust pipeline
+        chose it: the verified view with the most inliers, else the plain pair); None when the
+        cascade did not run."""
+        return next((v for v in self.views if v["used"]), None)
 
     def __len__(self) -> int:
         return len(self.corrs)
