@@ -44,9 +44,11 @@
 //! within R/2, its weighted zero-mean normalised cross-correlation (ZNCC) at the finest
 //! level both higher than the input's and at least [`AffineRefineOptions::min_zncc`], and t
 //! well determined: the worst-direction standard deviation of t from σ² H⁻¹ at the finest level
-//! (`Window::shift_std`) at most [`AffineRefineOptions::max_shift_std`], which refuses windows
+//! (`Window::uncertainty`) at most [`AffineRefineOptions::max_shift_std`], which refuses windows
 //! on a lone edge, where a shift along it fits as well (the aperture problem). Otherwise the
-//! input AC comes back unchanged (textureless or occluded windows, repetitive texture).
+//! input AC comes back unchanged (textureless or occluded windows, repetitive texture), with a
+//! [`RefineStatus`] that says which check failed, and a low `affine_confidence`: a returned
+//! input is never passed off as a refined AC ([`crate::confidence`]).
 //!
 //! Known limit: a window can fit a quite different (t, A) about as well as the true one, and
 //! then the fit is well determined around the wrong optimum; no check here sees it
@@ -147,15 +149,78 @@ impl AffineRefineOptions {
     }
 }
 
+/// What became of one AC in [`refine_affine`]: refined, or why the input came back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+pub enum RefineStatus {
+    /// The fit converged and passed every check of the module docs: the row is the result.
+    #[default]
+    Refined,
+    /// The window of image A is flat at the finest level (no texture to fit).
+    Flat,
+    /// The fit left the plausible set: not finite, det A ≤ 0, or the shift over R/2.
+    Diverged,
+    /// The fit's ZNCC is below [`AffineRefineOptions::min_zncc`].
+    LowZncc,
+    /// The fit's ZNCC does not beat the input's.
+    NotImproved,
+    /// The shift is ill-determined (over [`AffineRefineOptions::max_shift_std`]): a lone edge.
+    Aperture,
+}
+
+impl RefineStatus {
+    /// Every status, in the order of [`RefineStatus::code`].
+    pub const ALL: [RefineStatus; 6] = [
+        Self::Refined,
+        Self::Flat,
+        Self::Diverged,
+        Self::LowZncc,
+        Self::NotImproved,
+        Self::Aperture,
+    ];
+
+    /// A stable small integer (0 = refined), the index in [`RefineStatus::ALL`].
+    pub fn code(self) -> u8 {
+        self as u8
+    }
+
+    /// The name used by the Python API: `"refined"`, `"flat"`, `"diverged"`, `"low_zncc"`,
+    /// `"not_improved"`, `"aperture"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Refined => "refined",
+            Self::Flat => "flat",
+            Self::Diverged => "diverged",
+            Self::LowZncc => "low_zncc",
+            Self::NotImproved => "not_improved",
+            Self::Aperture => "aperture",
+        }
+    }
+}
+
 /// The result of [`refine_affine`].
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct AffineRefinement {
     /// `[x1, y1, x2, y2, a11, a12, a21, a22]` per AC: refined where `refined[i]`, else the input.
     pub corrs: Vec<[f64; 8]>,
-    /// Whether AC i was refined (its result passed the checks of the module docs).
+    /// Whether AC i was refined (its result passed the checks of the module docs):
+    /// `status[i] == RefineStatus::Refined`.
     pub refined: Vec<bool>,
+    /// What became of each AC; a rejected one says why.
+    pub status: Vec<RefineStatus>,
     /// The weighted ZNCC of each returned AC at the finest level (NaN for a flat window).
     pub zncc: Vec<f64>,
+    /// The standard deviation of the returned AC's translation from the Gauss–Newton
+    /// covariance σ² H⁻¹ at the finest level, pixels of image B, worst direction (+∞ for a
+    /// flat window or a ZNCC ≤ 0).
+    pub shift_std: Vec<f64>,
+    /// The expected ‖δA‖_F of the returned AC's A from the same covariance (its 4×4 affine
+    /// block, mapped through A; +∞ where `shift_std` is).
+    pub affine_std: Vec<f64>,
+    /// The calibrated probability that each returned A is good (cosine with the true A ≥ 0.9;
+    /// [`crate::confidence`]), from the refinement's outcome and the neighbouring ACs.
+    pub affine_confidence: Vec<f64>,
+    /// `affine_confidence ≥` the calibrated threshold ([`crate::confidence`]).
+    pub reliable: Vec<bool>,
 }
 
 /// Refines the affine maps (and, with `move_points`, x2) of `corrs` against the images; see
@@ -183,7 +248,7 @@ pub fn refine_affine(
         .iter()
         .map(|&sigma| Level::new(image_a, image_b, sigma, options.radius))
         .collect();
-    let results: Vec<(bool, [f64; 8], f64)> = corrs
+    let results: Vec<OneResult> = corrs
         .par_iter()
         .with_min_len(16)
         .map_init(Window::default, |window, c| {
@@ -191,12 +256,27 @@ pub fn refine_affine(
         })
         .collect();
     let mut out = AffineRefinement::default();
-    for (refined, c, z) in results {
-        out.refined.push(refined);
-        out.corrs.push(c);
-        out.zncc.push(z);
+    for r in results {
+        out.refined.push(r.status == RefineStatus::Refined);
+        out.status.push(r.status);
+        out.corrs.push(r.corr);
+        out.zncc.push(r.zncc);
+        out.shift_std.push(r.shift_std);
+        out.affine_std.push(r.affine_std);
     }
+    let conf = crate::confidence::affine_confidence(&out.corrs, None, Some(&out))?;
+    out.affine_confidence = conf.confidence;
+    out.reliable = conf.reliable;
     Ok(out)
+}
+
+/// One AC's outcome in [`refine_one`].
+struct OneResult {
+    status: RefineStatus,
+    corr: [f64; 8],
+    zncc: f64,
+    shift_std: f64,
+    affine_std: f64,
 }
 
 /// A blurred image, optionally interleaved with its gradient.
@@ -433,21 +513,24 @@ impl Window {
     }
 
     /// The standard deviation (pixels of image B, worst direction) of the translation fitted
-    /// with this template's Gauss–Newton matrix `h` at the warp's linear part `a` and ZNCC `z`.
+    /// with this template's Gauss–Newton matrix `h` at the warp's linear part `a` and ZNCC `z`,
+    /// and the expected ‖δA‖_F of its linear part.
     ///
     /// Cov(Δp) ≈ σ² H⁻¹, with σ² the weighted mean squared residual in template units: the
     /// regression of g on T leaves ‖g − ḡ‖²_w (1 − z²), and α = z ‖g − ḡ‖_w / ‖T − T̄‖_w, so
     /// ‖T − T̄‖²_w (1 − z²) / z² after the division by α; floored at (1/256)², an 8-bit image's
     /// quantisation, so that a noiseless edge is still found ill-posed. The translation block
     /// of H⁻¹ is the marginal covariance of Δt given the shape; image B's translation is A Δt.
-    fn shift_std(
+    /// The linear part composes as A (I + ΔA)⁻¹ ≈ A − A ΔA, so E‖δA‖²_F = E‖A ΔA‖²_F, taken
+    /// as ‖A‖²_F / 2 · tr Cov(ΔA) (exact when A is a similarity).
+    fn uncertainty(
         &self,
         h: &nalgebra::Cholesky<f64, nalgebra::U6>,
         a: &Matrix2<f64>,
         z: f64,
-    ) -> f64 {
+    ) -> (f64, f64) {
         if !(z > 0.0) {
-            return f64::INFINITY;
+            return (f64::INFINITY, f64::INFINITY);
         }
         let residual = self.norm_sq * (1.0 - z * z).max(0.0) / (z * z) / self.weight;
         let sigma_sq = residual.max(1.0 / (256.0 * 256.0));
@@ -457,7 +540,9 @@ impl Window {
         // Largest eigenvalue of the symmetric 2×2 matrix.
         let (p, q, r) = (cov[(0, 0)], cov[(0, 1)], cov[(1, 1)]);
         let lambda = 0.5 * (p + r) + (0.25 * (p - r) * (p - r) + q * q).sqrt();
-        lambda.max(0.0).sqrt()
+        let trace_a = (2..6).map(|k| inv[(k, k)]).sum::<f64>() * sigma_sq;
+        let affine = (a.norm_squared() / 2.0 * trace_a.max(0.0)).sqrt();
+        (lambda.max(0.0).sqrt(), affine)
     }
 
     /// The weighted ZNCC from [`Window::correlate`]'s sums.
@@ -507,7 +592,7 @@ fn refine_one(
     levels: &[Level],
     options: &AffineRefineOptions,
     window: &mut Window,
-) -> (bool, [f64; 8], f64) {
+) -> OneResult {
     let x1 = [c[0], c[1]];
     let x2 = [c[2], c[3]];
     let a0 = [c[4], c[5], c[6], c[7]];
@@ -579,7 +664,13 @@ fn refine_one(
     // Judged at the finest level, which the window still holds from the last pass of the
     // loop: the input, then the result.
     let Some(h) = h_finest else {
-        return (false, *c, f64::NAN);
+        return OneResult {
+            status: RefineStatus::Flat,
+            corr: *c,
+            zncc: f64::NAN,
+            shift_std: f64::INFINITY,
+            affine_std: f64::INFINITY,
+        };
     };
     let finest = levels.last().expect("at least one level");
     let (_, tg, sg, gg) = window.correlate(finest, x2, &a0);
@@ -593,18 +684,42 @@ fn refine_one(
     let plausible = a_out.iter().chain(&t).all(|v| v.is_finite())
         && a.determinant() > 0.0
         && t[0].abs().max(t[1].abs()) < radius / 2.0;
-    if plausible {
-        // The ZNCC of what is returned: with fixed points, A is judged at x2.
-        let (_, tg, sg, gg) = window.correlate(finest, x2_out, &a_out);
-        let z_out = window.zncc(tg, sg, gg);
-        let shift_std = window.shift_std(&h, &a, z_out);
-        if z_out >= options.min_zncc && z_out > z_in && shift_std <= options.max_shift_std {
-            let [p, q] = x2_out;
-            let [a11, a12, a21, a22] = a_out;
-            return (true, [x1[0], x1[1], p, q, a11, a12, a21, a22], z_out);
+    let rejected = |status| {
+        let a_in = Matrix2::new(a0[0], a0[1], a0[2], a0[3]);
+        let (shift_std, affine_std) = window.uncertainty(&h, &a_in, z_in);
+        OneResult {
+            status,
+            corr: *c,
+            zncc: z_in,
+            shift_std,
+            affine_std,
         }
+    };
+    if !plausible {
+        return rejected(RefineStatus::Diverged);
     }
-    (false, *c, z_in)
+    // The ZNCC of what is returned: with fixed points, A is judged at x2.
+    let (_, tg, sg, gg) = window.correlate(finest, x2_out, &a_out);
+    let z_out = window.zncc(tg, sg, gg);
+    let (shift_std, affine_std) = window.uncertainty(&h, &a, z_out);
+    let status = if !(z_out >= options.min_zncc) {
+        RefineStatus::LowZncc
+    } else if !(z_out > z_in) {
+        RefineStatus::NotImproved
+    } else if !(shift_std <= options.max_shift_std) {
+        RefineStatus::Aperture
+    } else {
+        let [p, q] = x2_out;
+        let [a11, a12, a21, a22] = a_out;
+        return OneResult {
+            status: RefineStatus::Refined,
+            corr: [x1[0], x1[1], p, q, a11, a12, a21, a22],
+            zncc: z_out,
+            shift_std,
+            affine_std,
+        };
+    };
+    rejected(status)
 }
 
 /// The image convolved with a Gaussian of σ pixels (kernel radius ⌈3σ⌉, border replicated),

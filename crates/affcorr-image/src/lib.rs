@@ -24,6 +24,7 @@
 //! ```
 
 pub mod affine_refine;
+pub mod confidence;
 pub mod error;
 pub mod gray;
 pub mod patches;
@@ -31,7 +32,8 @@ pub mod resize;
 pub mod rgb;
 pub mod warp;
 
-pub use affine_refine::{AffineRefineOptions, AffineRefinement, refine_affine};
+pub use affine_refine::{AffineRefineOptions, AffineRefinement, RefineStatus, refine_affine};
+pub use confidence::{AcConfidence, ConfidenceModel, NetworkSpread, affine_confidence};
 pub use error::{ImageError, Result};
 pub use gray::{GrayImage, LUMA_WEIGHTS, PixelData};
 pub use patches::{PATCH_LEN, PATCH_SIZE, Patches, extract_named, extract_patches};
