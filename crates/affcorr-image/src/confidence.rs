@@ -74,9 +74,10 @@ pub struct NetworkSpread {
 }
 
 /// What the confidence is computed from.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum ConfidenceModel {
     /// The network's ACs alone (no refinement).
+    #[default]
     Network,
     /// Refined ACs without the network's spread (`refine_affine` on any ACs).
     Refinement,
@@ -131,7 +132,7 @@ mod calibration {
 }
 
 /// The confidence of each AC.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct AcConfidence {
     /// The calibrated probability that A is good (cosine with A_gt ≥ 0.9), in [0, 1].
     pub confidence: Vec<f64>,

@@ -15,8 +15,8 @@ use std::path::Path;
 
 use crate::error::{Result, RunnerError};
 use crate::shape::{ShapeModel, ShapeModelOptions, ShapePrediction};
-use affcorr_image::GrayImage;
 use affcorr_image::extract_named;
+use affcorr_image::{AffineRefineOptions, GrayImage, affine_confidence, refine_affine};
 
 /// A shape network ready to turn matches into ACs.
 #[derive(Debug)]
@@ -39,6 +39,14 @@ pub struct ShapeEstimate {
     pub scale_b: Vec<f64>,
     /// A″ of each pair.
     pub residual_shape: Vec<[f64; 3]>,
+    /// The network's uncertainty about each pair ([`ShapePrediction::spread`]).
+    pub spread: Vec<affcorr_image::NetworkSpread>,
+    /// The confidence of each AC from the network's spread and the neighbouring ACs
+    /// ([`affcorr_image::confidence`], model `Network`); [`ShapeEstimator::estimate_refined`]
+    /// replaces it with the refined ACs' confidence.
+    pub confidence: affcorr_image::AcConfidence,
+    /// The refinement's report, from [`ShapeEstimator::estimate_refined`].
+    pub refinement: Option<affcorr_image::AffineRefinement>,
 }
 
 impl ShapeEstimator {
@@ -79,18 +87,43 @@ impl ShapeEstimator {
         let prediction = self.model.predict(&patch_a, &patch_b)?;
         assemble(prediction, x1, x2)
     }
+
+    /// [`Self::estimate`], then the affine Lucas–Kanade refinement of the ACs against the images
+    /// ([`affcorr_image::refine_affine`] with `options`): `corrs` are the refined rows (the
+    /// network's where the refinement failed, with a low confidence), `refinement` its report,
+    /// and `confidence` from the network's spread, the refinement and the neighbours.
+    pub fn estimate_refined(
+        &self,
+        image_a: &GrayImage,
+        image_b: &GrayImage,
+        x1: &[[f64; 2]],
+        x2: &[[f64; 2]],
+        options: &AffineRefineOptions,
+    ) -> Result<ShapeEstimate> {
+        let mut e = self.estimate(image_a, image_b, x1, x2)?;
+        let r = refine_affine(image_a, image_b, &e.corrs, options)?;
+        e.confidence = affine_confidence(&r.corrs, Some(&e.spread), Some(&r))?;
+        e.corrs = r.corrs.clone();
+        e.refinement = Some(r);
+        Ok(e)
+    }
 }
 
 /// ACs from a prediction and the points it was made at.
 fn assemble(p: ShapePrediction, x1: &[[f64; 2]], x2: &[[f64; 2]]) -> Result<ShapeEstimate> {
-    let corrs = p
+    let corrs: Vec<[f64; 8]> = p
         .affine()?
         .iter()
         .zip(x1.iter().zip(x2))
         .map(|(a, (p1, p2))| [p1[0], p1[1], p2[0], p2[1], a[0], a[1], a[2], a[3]])
         .collect();
+    let spread = p.spread();
+    let confidence = affine_confidence(&corrs, Some(&spread), None)?;
     Ok(ShapeEstimate {
         corrs,
+        spread,
+        confidence,
+        refinement: None,
         orientation_a: p.orientation_a,
         orientation_b: p.orientation_b,
         scale_a: p.scale_a,

@@ -24,6 +24,11 @@
 //! O = atan2(Σ p_k sin c_k, Σ p_k cos c_k)      (circular mean, in (−π, π])
 //! S = exp(Σ p_k ln s_k)                          (geometric mean)
 //! ```
+//!
+//! The spread of each distribution is the network's own uncertainty, kept for the AC's
+//! confidence ([`affcorr_image::confidence`]): 1 − R for the angle, R = ‖Σ p_k e^{i c_k}‖ the
+//! mean resultant length (0 when one bin has all the mass, 1 for a uniform one), and the
+//! standard deviation of ln s under p for the scale.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -60,6 +65,7 @@ pub struct ShapeBins {
     sin: Vec<f64>,
     cos: Vec<f64>,
     ln_scales: Vec<f64>,
+    ln_scales_sq: Vec<f64>,
 }
 
 impl ShapeBins {
@@ -77,6 +83,7 @@ impl ShapeBins {
             sin: angles.iter().map(|c| c.sin()).collect(),
             cos: angles.iter().map(|c| c.cos()).collect(),
             ln_scales: scales.iter().map(|s| s.ln()).collect(),
+            ln_scales_sq: scales.iter().map(|s| s.ln() * s.ln()).collect(),
             angles,
             scales,
         })
@@ -107,6 +114,24 @@ impl ShapeBins {
         assert_eq!(logits.len(), self.scales.len(), "scale logits width");
         let ([e], sum) = softmax_weighted_sums(logits, [&self.ln_scales])?;
         Some((e / sum).exp())
+    }
+
+    /// (O, 1 − R): the orientation and its spread, R = ‖Σ p e^{ic}‖ ∈ [0, 1] the mean
+    /// resultant length; `None` for non-finite logits.
+    pub fn decode_orientation_spread(&self, logits: &[f32]) -> Option<(f64, f64)> {
+        assert_eq!(logits.len(), self.angles.len(), "angle logits width");
+        let ([s, c], sum) = softmax_weighted_sums(logits, [&self.sin, &self.cos])?;
+        let r = (s.hypot(c) / sum).min(1.0);
+        Some((s.atan2(c), 1.0 - r))
+    }
+
+    /// (S, σ): the scale and the standard deviation of ln s under p; `None` for non-finite
+    /// logits.
+    pub fn decode_scale_spread(&self, logits: &[f32]) -> Option<(f64, f64)> {
+        assert_eq!(logits.len(), self.scales.len(), "scale logits width");
+        let ([e, e2], sum) = softmax_weighted_sums(logits, [&self.ln_scales, &self.ln_scales_sq])?;
+        let mean = e / sum;
+        Some((mean.exp(), (e2 / sum - mean * mean).max(0.0).sqrt()))
     }
 }
 
@@ -211,9 +236,28 @@ pub struct ShapePrediction {
     pub scale_b: Vec<f64>,
     /// A″ = (x0, x1, x2) of each pair.
     pub residual_shape: Vec<[f64; 3]>,
+    /// 1 − R of each patch of image A's angle distribution (see the module docs), in [0, 1].
+    pub angle_spread_a: Vec<f64>,
+    /// 1 − R of each patch of image B's angle distribution, in [0, 1].
+    pub angle_spread_b: Vec<f64>,
+    /// The standard deviation of ln S under each patch of image A's scale distribution.
+    pub scale_spread_a: Vec<f64>,
+    /// The standard deviation of ln S under each patch of image B's scale distribution.
+    pub scale_spread_b: Vec<f64>,
 }
 
 impl ShapePrediction {
+    /// The network's uncertainty about each pair, both patches together, as the confidence
+    /// takes it ([`affcorr_image::confidence`]): angle Σ (1 − R), scale √(σ_a² + σ_b²).
+    pub fn spread(&self) -> Vec<affcorr_image::NetworkSpread> {
+        (0..self.len())
+            .map(|i| affcorr_image::NetworkSpread {
+                angle: self.angle_spread_a[i] + self.angle_spread_b[i],
+                scale: self.scale_spread_a[i].hypot(self.scale_spread_b[i]),
+            })
+            .collect()
+    }
+
     /// The number of pairs.
     pub fn len(&self) -> usize {
         self.orientation_a.len()
@@ -414,15 +458,16 @@ impl ShapeModel {
             what,
             reason: format!("row {row} contains NaN or infinity"),
         };
-        let decode_row = |i: usize| -> Result<(f64, f64, f64, f64, [f64; 3])> {
+        type Row = ((f64, f64), (f64, f64), (f64, f64), (f64, f64), [f64; 3]);
+        let decode_row = |i: usize| -> Result<Row> {
             let angle = |v: &[f32], what| {
                 self.bins
-                    .decode_orientation(&v[i * ka..(i + 1) * ka])
+                    .decode_orientation_spread(&v[i * ka..(i + 1) * ka])
                     .ok_or_else(|| non_finite(what, i))
             };
             let scale = |v: &[f32], what| {
                 self.bins
-                    .decode_scale(&v[i * ks..(i + 1) * ks])
+                    .decode_scale_spread(&v[i * ks..(i + 1) * ks])
                     .ok_or_else(|| non_finite(what, i))
             };
             let r = &raw.residual_shape[3 * i..3 * i + 3];
@@ -448,12 +493,16 @@ impl ShapeModel {
             // In order, so that the error names the first bad row.
             .collect::<Result<Vec<_>>>()?;
         let mut p = ShapePrediction::default();
-        for (oa, ob, sa, sb, r) in rows {
+        for ((oa, ua), (ob, ub), (sa, va), (sb, vb), r) in rows {
             p.orientation_a.push(oa);
             p.orientation_b.push(ob);
             p.scale_a.push(sa);
             p.scale_b.push(sb);
             p.residual_shape.push(r);
+            p.angle_spread_a.push(ua);
+            p.angle_spread_b.push(ub);
+            p.scale_spread_a.push(va);
+            p.scale_spread_b.push(vb);
         }
         Ok(p)
     }
@@ -794,6 +843,25 @@ mod tests {
         // Huge logits do not overflow; a NaN logit is reported.
         assert!((bins.decode_scale(&[1e30, 0.0, 0.0]).unwrap() - 0.5).abs() < 1e-12);
         assert!(bins.decode_orientation(&[f32::NAN, 0.0, 0.0]).is_none());
+        // The spreads: R and the std of ln s under p, against the sums written out.
+        let (o, u) = bins.decode_orientation_spread(&logits).unwrap();
+        assert!((o - s.atan2(c)).abs() < 1e-12);
+        assert!((u - (1.0 - s.hypot(c))).abs() < 1e-12);
+        let e2: f64 = bins
+            .scales()
+            .iter()
+            .zip(&p)
+            .map(|(s, p)| p * s.ln() * s.ln())
+            .sum();
+        let (sc, sd) = bins.decode_scale_spread(&logits).unwrap();
+        assert!((sc - e.exp()).abs() < 1e-12 && (sd - (e2 - e * e).sqrt()).abs() < 1e-12);
+        // One certain bin: no spread; equal logits over opposite angles: R = 0.
+        let (_, u) = bins.decode_orientation_spread(&[80.0, 0.0, 0.0]).unwrap();
+        let (_, sd) = bins.decode_scale_spread(&[0.0, 80.0, 0.0]).unwrap();
+        assert!(u < 1e-12 && sd < 1e-12, "{u} {sd}");
+        let opposite = ShapeBins::new(vec![0.0, std::f64::consts::PI], vec![1.0]).unwrap();
+        let (_, u) = opposite.decode_orientation_spread(&[1.0, 1.0]).unwrap();
+        assert!((u - 1.0).abs() < 1e-12, "{u}");
     }
 
     #[test]
