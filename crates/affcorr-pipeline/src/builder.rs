@@ -51,6 +51,7 @@ pub struct PipelineBuilder {
     threads: Option<usize>,
     shape_batch_size: usize,
     affine_refinement: Option<AffineRefineOptions>,
+    drop_unreliable: bool,
     views: ViewOptions,
     seed: u64,
 }
@@ -71,6 +72,7 @@ impl Default for PipelineBuilder {
             threads: None,
             shape_batch_size: affcorr_runner::shape::DEFAULT_BATCH_SIZE,
             affine_refinement: defaults::REFINE_AFFINE.then(AffineRefineOptions::default),
+            drop_unreliable: false,
             views: ViewOptions::default(),
             seed: defaults::SEED,
         }
@@ -177,6 +179,14 @@ impl PipelineBuilder {
         self
     }
 
+    /// Whether to drop the ACs whose A is not reliable (`Matches::reliable`, see
+    /// [`affcorr_image::confidence`]) before they are returned or estimated from. Default
+    /// false: every match comes back, each with its `affine_confidence` and `reliable` flag.
+    pub fn drop_unreliable(mut self, drop: bool) -> Self {
+        self.drop_unreliable = drop;
+        self
+    }
+
     /// The view cascade for pairs the plain matcher cannot solve (rotation, zoom, tilt; see
     /// [`crate::views`]). Default: [`ViewOptions::default`], mode [`defaults::VIEWS`]. Dense
     /// matchers never use it.
@@ -276,6 +286,7 @@ impl PipelineBuilder {
             matcher,
             shape,
             affine_refinement: self.affine_refinement.clone(),
+            drop_unreliable: self.drop_unreliable,
             views: self.views.clone(),
             max_matches,
             max_side: self.max_side,

@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 
 use affcorr_geom::Mat3;
 use affcorr_geom::camera::Intrinsics;
+use affcorr_image::affine_confidence;
 use affcorr_image::{
     AffineRefineOptions, AffineWarp, GrayImage, RgbImage, ac_from_views, ac_to_original,
     extract_named, limit_side, refine_affine, warp_image,
@@ -77,6 +78,7 @@ pub struct Pipeline {
     pub(crate) matcher: PointMatcher,
     pub(crate) shape: ShapeEstimator,
     pub(crate) affine_refinement: Option<AffineRefineOptions>,
+    pub(crate) drop_unreliable: bool,
     pub(crate) views: ViewOptions,
     pub(crate) max_matches: Option<usize>,
     pub(crate) max_side: Option<usize>,
@@ -96,6 +98,8 @@ const MAX_GUIDED_VIEWS: usize = 3;
 struct WorkMatches {
     corrs: Vec<[f64; 8]>,
     certainty: Vec<f64>,
+    affine_confidence: Vec<f64>,
+    reliable: Vec<bool>,
     num_keypoints: (usize, usize),
 }
 
@@ -155,6 +159,11 @@ impl Pipeline {
     /// The view cascade's options.
     pub fn views(&self) -> &ViewOptions {
         &self.views
+    }
+
+    /// Whether unreliable ACs are dropped ([`PipelineBuilder::drop_unreliable`]).
+    pub fn drop_unreliable(&self) -> bool {
+        self.drop_unreliable
     }
 
     /// The affine refinement's options (`None` when it is off).
@@ -382,13 +391,19 @@ impl Pipeline {
             views = views.len(),
             "matched a pair: {timings}"
         );
-        Ok(Matches {
+        let mut matches = Matches {
             corrs,
             certainty: work.certainty,
+            affine_confidence: work.affine_confidence,
+            reliable: work.reliable,
             num_keypoints: work.num_keypoints,
             timings,
             views,
-        })
+        };
+        if self.drop_unreliable {
+            matches.retain_reliable();
+        }
+        Ok(matches)
     }
 
     /// Matches, patches, shape network and refinement on two images (the working images, or
@@ -434,13 +449,22 @@ impl Pipeline {
             .map(|(m, (p, q))| [p[0], p[1], q[0], q[1], m[0], m[1], m[2], m[3]])
             .collect();
         timings.shape_net += elapsed(&mut t);
-        if let Some(options) = &self.affine_refinement {
-            corrs = refine_affine(work_a, work_b, &corrs, options)?.corrs;
+        // Every AC is scored: a failed refinement returns the network's A, flagged unreliable.
+        let spread = prediction.spread();
+        let confidence = if let Some(options) = &self.affine_refinement {
+            let r = refine_affine(work_a, work_b, &corrs, options)?;
+            let c = affine_confidence(&r.corrs, Some(&spread), Some(&r))?;
+            corrs = r.corrs;
             timings.affine_refine += elapsed(&mut t);
-        }
+            c
+        } else {
+            affine_confidence(&corrs, Some(&spread), None)?
+        };
         Ok(WorkMatches {
             corrs,
             certainty,
+            affine_confidence: confidence.confidence,
+            reliable: confidence.reliable,
             num_keypoints: raw.num_keypoints,
         })
     }

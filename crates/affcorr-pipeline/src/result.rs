@@ -75,6 +75,14 @@ pub struct Matches {
     /// The matcher's certainty of each match (MNN: cosine similarity; XFeat*: refinement
     /// confidence; LighterGlue: match score; dense: the certainty map), higher is better.
     pub certainty: Vec<f64>,
+    /// The calibrated probability that each AC's A is good (cosine with the true A ≥ 0.9), in
+    /// [0, 1], from the shape network's spread, the refinement's outcome and the neighbouring
+    /// ACs ([`affcorr_image::confidence`]).
+    pub affine_confidence: Vec<f64>,
+    /// Whether each AC's A can be trusted: `affine_confidence` at least the calibrated
+    /// threshold (an AC whose refinement failed is not reliable). With
+    /// [`crate::PipelineBuilder::drop_unreliable`] only reliable ACs are returned.
+    pub reliable: Vec<bool>,
     /// Keypoints (or semi-dense cells) found in image A and in image B; for a dense matcher the
     /// cells of its grid with certainty > 0 that warp into B (the same number twice).
     pub num_keypoints: (usize, usize),
@@ -94,6 +102,20 @@ impl Matches {
             .filter(|v| v.verified)
             .max_by_key(|v| v.inliers)
             .or(self.views.first())
+    }
+
+    /// Keeps only the reliable ACs (all per-AC fields alike).
+    pub fn retain_reliable(&mut self) {
+        let keep = std::mem::take(&mut self.reliable);
+        let mut k = keep.iter();
+        self.corrs.retain(|_| *k.next().expect("one flag per AC"));
+        let mut k = keep.iter();
+        self.certainty
+            .retain(|_| *k.next().expect("one flag per AC"));
+        let mut k = keep.iter();
+        self.affine_confidence
+            .retain(|_| *k.next().expect("one flag per AC"));
+        self.reliable = vec![true; self.corrs.len()];
     }
 
     /// The number of ACs.
