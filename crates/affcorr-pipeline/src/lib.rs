@@ -64,6 +64,8 @@
 //! - [`defaults`]: the one set of defaults, and [`Geometry`].
 //! - [`builder`]: [`PipelineBuilder`], model paths and options.
 //! - [`pipeline`]: [`Pipeline`]: `match_pair`, `match_pairs` and the estimators.
+//! - [`features`]: [`Features`], one image's features: [`Pipeline::extract`] once per image,
+//!   [`Pipeline::match_features`] per pair (what `match_pairs` does for shared images).
 //! - [`source`]: [`ImageSource`], the image arguments (files, gray or colour buffers).
 //! - [`views`]: the view cascade for rotated, zoomed and tilted pairs.
 //! - [`result`]: [`Matches`], [`Timings`] and [`Estimated`].
@@ -72,6 +74,7 @@
 pub mod builder;
 pub mod defaults;
 pub mod error;
+pub mod features;
 pub mod pipeline;
 pub mod result;
 pub mod source;
@@ -83,6 +86,7 @@ pub use builder::{
 };
 pub use defaults::Geometry;
 pub use error::{PipelineError, Result};
+pub use features::Features;
 pub use pipeline::{MAX_WORKING_PIXELS, Pipeline};
 pub use result::{Estimated, Matches, Timings};
 pub use source::ImageSource;

@@ -8,8 +8,8 @@ use affcorr_geom::Mat3;
 use affcorr_geom::camera::Intrinsics;
 use affcorr_image::affine_confidence;
 use affcorr_image::{
-    AffineRefineOptions, AffineWarp, GrayImage, RgbImage, ac_from_views, ac_to_original,
-    extract_named, limit_side, refine_affine, warp_image,
+    AffineRefineOptions, AffineWarp, GrayImage, ac_from_views, ac_to_original, extract_named,
+    limit_side, refine_affine, warp_image,
 };
 use affcorr_ransac::options::Cancel;
 use affcorr_ransac::problems::relpose::PoseModel;
@@ -17,10 +17,11 @@ use affcorr_ransac::{
     Correspondences, Estimate, EstimatorOptions, SamplerKind, estimate_fundamental,
     estimate_homography, estimate_relative_pose,
 };
-use affcorr_runner::{Backbone, DenseMatcher, Matcher, PointMatcher, ShapeEstimator};
+use affcorr_runner::{Backbone, DenseMatcher, Matcher, PointMatcher, PointMatches, ShapeEstimator};
 
 use crate::builder::PipelineBuilder;
 use crate::error::{PipelineError, Result};
+use crate::features::Features;
 use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
 use crate::views::{
@@ -195,6 +196,11 @@ impl Pipeline {
     /// the first call and kept; at most one per core). On 2 cores shared with other work this
     /// gave 12–20 % more pairs per second than pairs one after the other with every thread per
     /// pair (benches/results/pipeline_timing.md). The results equal [`Self::match_pair`]'s.
+    ///
+    /// An image in several pairs (the same path or the same buffer) is decoded and its
+    /// features extracted once ([`Self::extract`]), kept until its last pair is matched
+    /// ([`Self::match_features`]); each pair's timings still count the extraction of both its
+    /// images.
     pub fn match_pairs<'a, A, B>(
         &self,
         pairs: impl IntoIterator<Item = (A, B)>,
@@ -241,10 +247,10 @@ impl Pipeline {
         } else {
             &[]
         };
+        let cache = FeatureCache::new(&pairs);
         if workers.is_empty() {
-            return pairs
-                .into_iter()
-                .map(|(a, b)| (!cancel.is_cancelled()).then(|| self.match_pair(a, b)))
+            return (0..pairs.len())
+                .map(|i| (!cancel.is_cancelled()).then(|| cache.match_pair(self, &pairs, i)))
                 .collect();
         }
         let next = AtomicUsize::new(0);
@@ -254,13 +260,15 @@ impl Pipeline {
                 .iter()
                 .take(pairs.len())
                 .map(|w| {
-                    let (next, pairs) = (&next, &pairs);
+                    let (next, pairs, cache) = (&next, &pairs, &cache);
                     scope.spawn(move || {
                         let mut done = Vec::new();
                         while !cancel.is_cancelled() {
                             let i = next.fetch_add(1, Ordering::Relaxed);
-                            let Some(&(a, b)) = pairs.get(i) else { break };
-                            done.push((i, w.match_pair(a, b)));
+                            if i >= pairs.len() {
+                                break;
+                            }
+                            done.push((i, cache.match_pair(w, pairs, i)));
                         }
                         done
                     })
@@ -345,46 +353,110 @@ impl Pipeline {
 
     fn match_inner(&self, a: ImageSource<'_>, b: ImageSource<'_>) -> Result<Matches> {
         let start = Instant::now();
-        let mut t = start;
-        let mut timings = Timings::default();
-        let dense = self.matcher() == Matcher::Dense;
-        let (img_a, img_b, colour) = if dense {
-            let (ga, ca) = a
-                .load_with_colour()
-                .map_err(|e| PipelineError::image(e, "image_a"))?;
-            let (gb, cb) = b
-                .load_with_colour()
-                .map_err(|e| PipelineError::image(e, "image_b"))?;
-            (ga, gb, Some((ca, cb)))
-        } else {
-            let ga = a.load().map_err(|e| PipelineError::image(e, "image_a"))?;
-            let gb = b.load().map_err(|e| PipelineError::image(e, "image_b"))?;
-            (ga, gb, None)
-        };
-        let (work_a, sa) = limit_side(&img_a, self.max_side);
-        let (work_b, sb) = limit_side(&img_b, self.max_side);
-        if !dense {
-            check_working_size(&img_a, &work_a, "image_a")?;
-            check_working_size(&img_b, &work_b, "image_b")?;
-        }
-        timings.decode += elapsed(&mut t);
+        let fa = self.extract_inner(a, "image_a")?;
+        let fb = self.extract_inner(b, "image_b")?;
+        let mut m = self.match_features_inner(&fa, &fb)?;
+        m.timings.total = start.elapsed();
+        Ok(m)
+    }
 
-        let colour = colour.as_ref().map(|(ca, cb)| (ca, cb));
-        let plain = self.match_working(&work_a, &work_b, colour, &mut timings)?;
+    /// The features of one image ([`Features`]): decoded, downscaled to `max_side`, and the
+    /// matcher's keypoints and descriptors (a dense matcher keeps the colour image). Matching
+    /// two with [`Self::match_features`] gives [`Self::match_pair`]'s result, bit for bit.
+    pub fn extract<'a>(&self, image: impl Into<ImageSource<'a>>) -> Result<Features> {
+        let image = image.into();
+        self.pool.install(|| self.extract_inner(image, "image"))
+    }
+
+    /// The ACs of two images' features ([`Self::extract`] of this pipeline, or of one built
+    /// with the same matcher, models and options): [`Self::match_pair`]'s result, bit for bit,
+    /// but for the timings, which count each image's extraction as well (`decode`, `matcher`,
+    /// `detection`).
+    pub fn match_features(&self, a: &Features, b: &Features) -> Result<Matches> {
+        self.pool.install(|| self.match_features_inner(a, b))
+    }
+
+    pub(crate) fn extract_inner(
+        &self,
+        src: ImageSource<'_>,
+        what: &'static str,
+    ) -> Result<Features> {
+        let mut t = Instant::now();
+        let dense = self.matcher() == Matcher::Dense;
+        let (img, colour) = if dense {
+            let (g, c) = src
+                .load_with_colour()
+                .map_err(|e| PipelineError::image(e, what))?;
+            (g, Some(c))
+        } else {
+            (src.load().map_err(|e| PipelineError::image(e, what))?, None)
+        };
+        let (work, scale) = limit_side(&img, self.max_side);
+        if !dense {
+            check_working_size(&img, &work, what)?;
+        }
+        let original_size = (img.width(), img.height());
+        let work = match work {
+            std::borrow::Cow::Owned(w) => w,
+            std::borrow::Cow::Borrowed(_) => img.into_owned(),
+        };
+        let decode = elapsed(&mut t);
+        let matcher = self.matcher.extract(&work, colour.as_ref())?;
+        Ok(Features {
+            work,
+            scale,
+            original_size,
+            matcher,
+            max_keypoints: self.max_keypoints(),
+            max_side: self.max_side,
+            decode,
+        })
+    }
+
+    pub(crate) fn match_features_inner(&self, fa: &Features, fb: &Features) -> Result<Matches> {
+        let start = Instant::now();
+        for (f, what) in [(fa, "features_a"), (fb, "features_b")] {
+            if f.matcher() != self.matcher()
+                || f.max_keypoints != self.max_keypoints()
+                || f.max_side != self.max_side
+            {
+                return Err(PipelineError::invalid(
+                    what,
+                    format!(
+                        "extracted with matcher {}, max_keypoints {}, max_side {:?}; this \
+                         pipeline has {}, {}, {:?}",
+                        f.matcher(),
+                        f.max_keypoints,
+                        f.max_side,
+                        self.matcher(),
+                        self.max_keypoints(),
+                        self.max_side
+                    ),
+                ));
+            }
+        }
+        let mut timings = Timings {
+            decode: fa.decode + fb.decode,
+            ..Timings::default()
+        };
+        let dense = self.matcher() == Matcher::Dense;
+        let (work_a, work_b) = (&fa.work, &fb.work);
+        let raw = self.matcher.match_features(&fa.matcher, &fb.matcher)?;
+        let plain = self.match_working(work_a, work_b, raw, &mut timings)?;
         let (work, views) = if dense || self.views.mode == ViewMode::Off {
             (plain, Vec::new())
         } else {
             let t = Instant::now();
-            let r = self.view_cascade(plain, &work_a, &work_b, &mut timings)?;
+            let r = self.view_cascade(plain, work_a, work_b, &mut timings)?;
             timings.views += t.elapsed();
             r
         };
         let corrs = work
             .corrs
             .iter()
-            .map(|row| ac_to_original(row, sa, sb))
+            .map(|row| ac_to_original(row, fa.scale, fb.scale))
             .collect();
-        timings.total = start.elapsed();
+        timings.total = start.elapsed() + fa.extraction_time() + fb.extraction_time();
         tracing::debug!(
             matcher = %self.matcher(),
             acs = work.corrs.len(),
@@ -406,16 +478,15 @@ impl Pipeline {
         Ok(matches)
     }
 
-    /// Matches, patches, shape network and refinement on two images (the working images, or
-    /// synthetic views of them): ACs in those images' pixels, most certain first.
+    /// Patches, shape network and refinement on the matches `raw` of two images (the working
+    /// images, or synthetic views of them): ACs in those images' pixels, most certain first.
     fn match_working(
         &self,
         work_a: &GrayImage,
         work_b: &GrayImage,
-        colour: Option<(&RgbImage, &RgbImage)>,
+        raw: PointMatches,
         timings: &mut Timings,
     ) -> Result<WorkMatches> {
-        let raw = self.matcher.match_images(work_a, work_b, colour)?;
         timings.decode += raw.timings.preprocess;
         timings.matcher += raw.timings.network;
         timings.detection += raw.timings.detection;
@@ -545,12 +616,9 @@ impl Pipeline {
             if small(&va) || small(&vb) {
                 continue;
             }
-            let m = self.match_working(
-                va.as_ref().unwrap_or(work_a),
-                vb.as_ref().unwrap_or(work_b),
-                None,
-                timings,
-            )?;
+            let (va, vb) = (va.as_ref().unwrap_or(work_a), vb.as_ref().unwrap_or(work_b));
+            let raw = self.matcher.match_images(va, vb, None)?;
+            let m = self.match_working(va, vb, raw, timings)?;
             let (wa, wb) = (
                 a_warp.map_or(AffineWarp::IDENTITY, |w| w.0),
                 b_warp.map_or(AffineWarp::IDENTITY, |w| w.0),
@@ -597,5 +665,117 @@ impl Pipeline {
             }
         }
         Ok((best, reports))
+    }
+}
+
+/// The features of the images of a batch ([`Pipeline::match_pairs`]), each extracted once
+/// (by the first pair that needs it) and dropped after the last pair that uses it: an image
+/// shared by k pairs costs one extraction instead of k. Images are the same when they are the
+/// same path or the same buffer.
+struct FeatureCache {
+    /// The image index of each pair's A and B.
+    index: Vec<(usize, usize)>,
+    slots: Vec<std::sync::Mutex<Slot>>,
+}
+
+struct Slot {
+    features: Option<std::sync::Arc<Features>>,
+    /// Pairs (sides) still to use it.
+    remaining: usize,
+}
+
+impl FeatureCache {
+    fn new<'a>(pairs: &[(ImageSource<'a>, ImageSource<'a>)]) -> Self {
+        #[derive(PartialEq, Eq, Hash)]
+        enum Key<'a> {
+            Path(&'a std::path::Path),
+            Buffer(usize),
+        }
+        let key = |s: &ImageSource<'a>| -> Key<'a> {
+            match *s {
+                ImageSource::Path(p) => Key::Path(p),
+                ImageSource::Image(img) => Key::Buffer(std::ptr::from_ref(img) as usize),
+                ImageSource::Rgb(img) => Key::Buffer(std::ptr::from_ref(img) as usize),
+            }
+        };
+        let mut ids = std::collections::HashMap::new();
+        let mut uses: Vec<usize> = Vec::new();
+        let mut id = |s| {
+            let n = ids.len();
+            let i = *ids.entry(key(s)).or_insert(n);
+            if i == uses.len() {
+                uses.push(0);
+            }
+            uses[i] += 1;
+            i
+        };
+        let index = pairs.iter().map(|(a, b)| (id(a), id(b))).collect();
+        let slots = uses
+            .into_iter()
+            .map(|remaining| {
+                std::sync::Mutex::new(Slot {
+                    features: None,
+                    remaining,
+                })
+            })
+            .collect();
+        Self { index, slots }
+    }
+
+    fn slot(&self, i: usize) -> std::sync::MutexGuard<'_, Slot> {
+        // A poisoned slot (a panic elsewhere) still holds valid data.
+        self.slots[i]
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// The features of image `i` (`src`), extracted by `w` unless cached; errors are not
+    /// cached (each pair reports its own).
+    fn features(
+        &self,
+        w: &Pipeline,
+        i: usize,
+        src: ImageSource<'_>,
+        what: &'static str,
+    ) -> Result<std::sync::Arc<Features>> {
+        let mut slot = self.slot(i);
+        if let Some(f) = &slot.features {
+            return Ok(f.clone());
+        }
+        let f = std::sync::Arc::new(w.pool.install(|| w.extract_inner(src, what))?);
+        if slot.remaining > 1 {
+            slot.features = Some(f.clone());
+        }
+        Ok(f)
+    }
+
+    fn release(&self, i: usize) {
+        let mut slot = self.slot(i);
+        slot.remaining = slot.remaining.saturating_sub(1);
+        if slot.remaining == 0 {
+            slot.features = None;
+        }
+    }
+
+    /// Pair `k` on the pipeline `w`: [`Pipeline::match_pair`]'s result.
+    fn match_pair(
+        &self,
+        w: &Pipeline,
+        pairs: &[(ImageSource<'_>, ImageSource<'_>)],
+        k: usize,
+    ) -> Result<Matches> {
+        let start = Instant::now();
+        let (ia, ib) = self.index[k];
+        let (a, b) = pairs[k];
+        let r = self.features(w, ia, a, "image_a").and_then(|fa| {
+            let fb = self.features(w, ib, b, "image_b")?;
+            w.pool.install(|| w.match_features_inner(&fa, &fb))
+        });
+        self.release(ia);
+        self.release(ib);
+        r.map(|mut m| {
+            m.timings.total = m.timings.total.max(start.elapsed());
+            m
+        })
     }
 }

@@ -55,5 +55,8 @@ pub use shape::{ShapeBins, ShapeModel, ShapeModelOptions, ShapeOutputs, ShapePre
 pub use contract::resolve_threads;
 pub use dense::{DenseMatcher, DenseSample, DenseWarp, SamplingOptions, balanced_sample};
 pub use features::{Backbone, BackboneConfig, BackboneMaps, DenseFeatures, SparseFeatures};
-pub use matcher::{Matcher, MatcherFiles, MatcherTimings, ModelRole, PointMatcher, PointMatches};
+pub use matcher::{
+    FeatureData, ImageFeatures, Matcher, MatcherFiles, MatcherTimings, ModelRole, PointMatcher,
+    PointMatches,
+};
 pub use matching::{GlueMatches, LighterGlue, MnnMatches, RefineModel, mutual_nearest_neighbours};

@@ -181,6 +181,59 @@ pub struct PointMatches {
     pub timings: MatcherTimings,
 }
 
+/// What a matcher needs of one image to match it against others ([`PointMatcher::extract`]):
+/// computed once per image and matched with any number of others
+/// ([`PointMatcher::match_features`]), with the results of [`PointMatcher::match_images`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum FeatureData {
+    /// Sparse XFeat keypoints and descriptors (`"xfeat"`, `"xfeat-lighterglue"`).
+    Sparse(SparseFeatures),
+    /// The semi-dense cells of XFeat* at both scales (`"xfeat-star"`).
+    SemiDense(DenseFeatures),
+    /// A dense matcher runs on the pair: the colour image is kept (`"dense"`).
+    Colour(RgbImage),
+}
+
+/// One image's features ([`PointMatcher::extract`]); cloneable and independent of the matcher
+/// object that computed them (any [`PointMatcher`] of the same kind, models and options
+/// matches them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImageFeatures {
+    /// The matcher that computed them.
+    pub matcher: Matcher,
+    /// (W, H) of the gray image given.
+    pub image_size: (usize, usize),
+    /// The features.
+    pub data: FeatureData,
+    /// Wall time of the extraction (`preprocess`, `network`, `detection`; `matching` 0).
+    pub timings: MatcherTimings,
+}
+
+impl ImageFeatures {
+    /// Keypoints (or semi-dense cells) found; 0 for a dense matcher.
+    pub fn len(&self) -> usize {
+        match &self.data {
+            FeatureData::Sparse(f) => f.len(),
+            FeatureData::SemiDense(f) => f.len(),
+            FeatureData::Colour(_) => 0,
+        }
+    }
+
+    /// Whether no keypoint was found (always for a dense matcher).
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// The keypoints (cells) in the pixels of the image given; empty for a dense matcher.
+    pub fn keypoints(&self) -> &[[f32; 2]] {
+        match &self.data {
+            FeatureData::Sparse(f) => &f.keypoints,
+            FeatureData::SemiDense(f) => &f.keypoints,
+            FeatureData::Colour(_) => &[],
+        }
+    }
+}
+
 /// A loaded matcher; `Send` and `Sync` (inference runs under each model's mutex).
 #[derive(Debug)]
 pub struct PointMatcher {
@@ -302,24 +355,87 @@ impl PointMatcher {
     }
 
     /// Matches of a pair. `colour`: the same images in colour, which a dense matcher takes
-    /// (required for it; the others ignore it).
+    /// (required for it; the others ignore it). The same as [`Self::extract`] of each image,
+    /// then [`Self::match_features`].
     pub fn match_images(
         &self,
         a: &GrayImage,
         b: &GrayImage,
         colour: Option<(&RgbImage, &RgbImage)>,
     ) -> Result<PointMatches> {
+        if self.kind == Matcher::Dense && colour.is_none() {
+            return Err(RunnerError::invalid(
+                "colour",
+                "a dense matcher needs the colour images",
+            ));
+        }
+        let fa = self.extract(a, colour.map(|c| c.0))?;
+        let fb = self.extract(b, colour.map(|c| c.1))?;
+        self.match_features(&fa, &fb)
+    }
+
+    /// The features of one image (keypoints and descriptors; a dense matcher keeps the colour
+    /// image `colour`, which it requires; the others ignore it).
+    pub fn extract(&self, img: &GrayImage, colour: Option<&RgbImage>) -> Result<ImageFeatures> {
         let mut timings = MatcherTimings::default();
-        let mut m = match (self.kind, colour) {
-            (Matcher::Dense, Some((ca, cb))) => self.match_dense(ca, cb, a, b, &mut timings)?,
-            (Matcher::Dense, None) => {
+        let data = match self.kind {
+            Matcher::Dense => FeatureData::Colour(
+                colour
+                    .ok_or_else(|| {
+                        RunnerError::invalid("colour", "a dense matcher needs the colour image")
+                    })?
+                    .clone(),
+            ),
+            Matcher::XFeatStar => FeatureData::SemiDense(self.dense_features(img, &mut timings)?),
+            Matcher::XFeatMnn | Matcher::XFeatLighterGlue => {
+                FeatureData::Sparse(self.sparse_features(img, &mut timings)?)
+            }
+        };
+        Ok(ImageFeatures {
+            matcher: self.kind,
+            image_size: (img.width(), img.height()),
+            data,
+            timings,
+        })
+    }
+
+    /// Matches of two images' features ([`Self::extract`], by this matcher or one of the same
+    /// kind and models); the timings are the extraction's of both plus the matching's, so the
+    /// result equals [`Self::match_images`]'s in everything but wall times.
+    pub fn match_features(&self, a: &ImageFeatures, b: &ImageFeatures) -> Result<PointMatches> {
+        for (f, what) in [(a, "features_a"), (b, "features_b")] {
+            if f.matcher != self.kind {
                 return Err(RunnerError::invalid(
-                    "colour",
-                    "a dense matcher needs the colour images",
+                    what,
+                    format!(
+                        "computed by the {} matcher, this one is {}",
+                        f.matcher, self.kind
+                    ),
                 ));
             }
-            (Matcher::XFeatStar, _) => self.match_star(a, b, &mut timings)?,
-            _ => self.match_sparse(a, b, &mut timings)?,
+        }
+        let mut timings = MatcherTimings::default();
+        for f in [a, b] {
+            timings.preprocess += f.timings.preprocess;
+            timings.network += f.timings.network;
+            timings.detection += f.timings.detection;
+        }
+        let mut m = match (&a.data, &b.data) {
+            (FeatureData::Colour(ca), FeatureData::Colour(cb)) => {
+                self.match_dense(ca, cb, a.image_size, b.image_size, &mut timings)?
+            }
+            (FeatureData::SemiDense(fa), FeatureData::SemiDense(fb)) => {
+                self.match_star(fa, fb, &mut timings)?
+            }
+            (FeatureData::Sparse(fa), FeatureData::Sparse(fb)) => {
+                self.match_sparse(fa, fb, &mut timings)?
+            }
+            _ => {
+                return Err(RunnerError::invalid(
+                    "features_b",
+                    "its kind differs from features_a's",
+                ));
+            }
         };
         m.timings = timings;
         Ok(m)
@@ -338,8 +454,8 @@ impl PointMatcher {
         &self,
         colour_a: &RgbImage,
         colour_b: &RgbImage,
-        a: &GrayImage,
-        b: &GrayImage,
+        size_a: (usize, usize),
+        size_b: (usize, usize),
         timings: &mut MatcherTimings,
     ) -> Result<PointMatches> {
         let dense = self
@@ -357,11 +473,7 @@ impl PointMatcher {
                 ..Default::default()
             },
         )?;
-        let (x1, x2) = warp.to_pixels(
-            &sample.index,
-            (a.width(), a.height()),
-            (b.width(), b.height()),
-        );
+        let (x1, x2) = warp.to_pixels(&sample.index, size_a, size_b);
         let to_f32 = |p: Vec<[f64; 2]>| -> Vec<[f32; 2]> {
             p.into_iter().map(|[x, y]| [x as f32, y as f32]).collect()
         };
@@ -404,12 +516,10 @@ impl PointMatcher {
 
     fn match_sparse(
         &self,
-        a: &GrayImage,
-        b: &GrayImage,
+        fa: &SparseFeatures,
+        fb: &SparseFeatures,
         timings: &mut MatcherTimings,
     ) -> Result<PointMatches> {
-        let fa = self.sparse_features(a, timings)?;
-        let fb = self.sparse_features(b, timings)?;
         let mut t = Instant::now();
         let num_keypoints = (fa.len(), fb.len());
         let m = match &self.lighterglue {
@@ -465,16 +575,14 @@ impl PointMatcher {
 
     fn match_star(
         &self,
-        a: &GrayImage,
-        b: &GrayImage,
+        fa: &DenseFeatures,
+        fb: &DenseFeatures,
         timings: &mut MatcherTimings,
     ) -> Result<PointMatches> {
         let refine = self
             .refine
             .as_ref()
             .expect("XFeat* matchers load the refinement model");
-        let fa = self.dense_features(a, timings)?;
-        let fb = self.dense_features(b, timings)?;
         let mut t = Instant::now();
         let d = fa.dim;
         let m = mutual_nearest_neighbours(&fa.descriptors, &fb.descriptors, d);

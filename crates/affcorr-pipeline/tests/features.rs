@@ -1,0 +1,123 @@
+//! The per-image feature cache: [`Pipeline::extract`] + [`Pipeline::match_features`] (and
+//! `match_pairs`, which reuses the features of shared images) give `match_pair`'s results bit
+//! for bit, for every XFeat matcher and with the view cascade on.
+
+mod common;
+
+use affcorr_pipeline::{Features, Matcher, Matches, Pipeline, ViewMode, ViewOptions};
+
+fn pipeline(matcher: Matcher, views: ViewMode, threads: usize) -> Pipeline {
+    common::init();
+    Pipeline::builder()
+        .matcher(matcher)
+        .models_dir(common::models_dir())
+        .max_keypoints(256)
+        .max_side(320)
+        .views(ViewOptions {
+            mode: views,
+            max_views: 2,
+            ..Default::default()
+        })
+        .threads(threads)
+        .build()
+        .unwrap()
+}
+
+/// Equal in everything but wall times.
+fn assert_same(a: &Matches, b: &Matches) {
+    assert_eq!(a.corrs, b.corrs);
+    assert_eq!(a.certainty, b.certainty);
+    assert_eq!(a.num_keypoints, b.num_keypoints);
+    assert_eq!(a.views.len(), b.views.len());
+    for (u, v) in a.views.iter().zip(&b.views) {
+        assert_eq!(
+            (&u.view, u.matches, u.inliers, u.verified),
+            (&v.view, v.matches, v.inliers, v.verified)
+        );
+    }
+}
+
+#[test]
+fn features_match_like_match_pair_bit_for_bit() {
+    let dir = common::root().join("data/graffiti");
+    let (a, b) = (dir.join("graf1.png"), dir.join("graf3.png"));
+    for (matcher, views) in [
+        (Matcher::XFeatMnn, ViewMode::Full),
+        (Matcher::XFeatLighterGlue, ViewMode::Off),
+        (Matcher::XFeatStar, ViewMode::Off),
+    ] {
+        let p = pipeline(matcher, views, 2);
+        let direct = p.match_pair(&a, &b).unwrap();
+        assert!(direct.corrs.len() > 20, "{matcher}: {}", direct.corrs.len());
+        let (fa, fb) = (p.extract(&a).unwrap(), p.extract(&b).unwrap());
+        assert_eq!(fa.matcher(), matcher);
+        assert_eq!(fa.image_size(), (800, 640));
+        assert_eq!(fa.working_size(), (320, 256));
+        assert!(fa.len() > 50 && fa.len() <= 256 * 2, "{}", fa.len());
+        assert_same(&p.match_features(&fa, &fb).unwrap(), &direct);
+        // Twice, and after a round trip through bytes (the batch's disk cache).
+        assert_same(&p.match_features(&fa, &fb).unwrap(), &direct);
+        let (ra, rb) = (
+            Features::from_bytes(&fa.to_bytes()).unwrap(),
+            Features::from_bytes(&fb.to_bytes()).unwrap(),
+        );
+        assert_eq!(
+            (&ra.keypoints(), ra.descriptors()),
+            (&fa.keypoints(), fa.descriptors())
+        );
+        assert_same(&p.match_features(&ra, &rb).unwrap(), &direct);
+        // Without views every x1 is a keypoint of A (the matcher's points; the affine
+        // refinement moves x2 only): how the batch's hloc output indexes the matches.
+        if matcher == Matcher::XFeatLighterGlue {
+            let kp = fa.keypoints();
+            for c in &direct.corrs {
+                assert!(
+                    kp.contains(&[c[0], c[1]]),
+                    "{matcher}: x1 {c:?} is no keypoint"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn features_of_another_configuration_are_refused() {
+    let dir = common::root().join("data/graffiti");
+    let p = pipeline(Matcher::XFeatMnn, ViewMode::Off, 1);
+    let f = p.extract(dir.join("graf1.png").as_path()).unwrap();
+    let q = pipeline(Matcher::XFeatLighterGlue, ViewMode::Off, 1);
+    let e = q.match_features(&f, &f).unwrap_err().to_string();
+    assert!(
+        e.starts_with("features_a: extracted with matcher xfeat"),
+        "{e}"
+    );
+    let e = Features::from_bytes(b"nonsense").unwrap_err().to_string();
+    assert!(e.starts_with("data:"), "{e}");
+    let e = p.extract("/nonexistent.png").unwrap_err().to_string();
+    assert!(e.contains("nonexistent"), "{e}");
+}
+
+#[test]
+fn match_pairs_reuses_shared_images_with_match_pair_results() {
+    let dir = common::root().join("data/graffiti");
+    let (a, b) = (dir.join("graf1.png"), dir.join("graf3.png"));
+    let missing = dir.join("missing.png");
+    let pairs = [
+        (a.as_path(), b.as_path()),
+        (b.as_path(), a.as_path()),
+        (a.as_path(), a.as_path()),
+        (a.as_path(), missing.as_path()),
+        (b.as_path(), b.as_path()),
+    ];
+    for threads in [1, 2] {
+        let p = pipeline(Matcher::XFeatMnn, ViewMode::Auto, threads);
+        let batch = p.match_pairs(pairs);
+        for (&(x, y), r) in pairs.iter().zip(&batch) {
+            match (p.match_pair(x, y), r) {
+                (Ok(want), Ok(got)) => assert_same(got, &want),
+                (Err(want), Err(got)) => assert_eq!(got.to_string(), want.to_string()),
+                (want, got) => panic!("{threads} threads: {want:?} vs {got:?}"),
+            }
+        }
+    }
+}
