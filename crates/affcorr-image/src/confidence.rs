@@ -4,7 +4,8 @@
 //! pair), and where the affine Lucas–Kanade refinement ([`crate::refine_affine`]) fails its
 //! checks it returns the input A unchanged. So every AC carries `affine_confidence` ∈ [0, 1],
 //! the calibrated probability that its A is *good* — cosine similarity of vec(A) and vec(A_gt)
-//! of at least 0.9 — and `reliable = affine_confidence ≥ threshold`.
+//! of at least 0.9 — and `reliable = affine_confidence ≥ threshold`; where a refinement ran,
+//! only a refined AC can be reliable (one whose refinement failed carries the input's A).
 //!
 //! # Features
 //!
@@ -136,7 +137,8 @@ mod calibration {
 pub struct AcConfidence {
     /// The calibrated probability that A is good (cosine with A_gt ≥ 0.9), in [0, 1].
     pub confidence: Vec<f64>,
-    /// `confidence ≥ model.threshold()`.
+    /// `confidence ≥ model.threshold()`, and, when a refinement is given, refined (an AC whose
+    /// refinement failed is never reliable).
     pub reliable: Vec<bool>,
     /// The features of each AC ([`FEATURE_NAMES`]).
     pub features: Vec<[f64; FEATURES]>,
@@ -228,8 +230,14 @@ pub fn affine_confidence(
         })
         .collect();
     let threshold = model.threshold();
+    // A refinement that failed returned its input: never reliable, whatever the score.
+    let refined = |i: usize| refinement.is_none_or(|r| r.status[i] == RefineStatus::Refined);
     Ok(AcConfidence {
-        reliable: confidence.iter().map(|&c| c >= threshold).collect(),
+        reliable: confidence
+            .iter()
+            .enumerate()
+            .map(|(i, &c)| c >= threshold && refined(i))
+            .collect(),
         confidence,
         features,
         model,
