@@ -26,6 +26,12 @@ pub const BACKBONE_CONTRACT: &str = "features-backbone-v1";
 pub const REFINE_CONTRACT: &str = "features-refine-v1";
 /// LighterGlue: keypoints and descriptors of two images → matches.
 pub const LIGHTERGLUE_CONTRACT: &str = "matcher-lighterglue-v1";
+/// LightGlue in pieces (crate::lightglue): input projection and positional encoding.
+pub const GLUE_ENCODE_CONTRACT: &str = "matcher-lightglue-encode-v1";
+/// LightGlue in pieces: one transformer layer (chosen by an input) with its confidence heads.
+pub const GLUE_LAYER_CONTRACT: &str = "matcher-lightglue-layer-v1";
+/// LightGlue in pieces: the assignment head of a layer and the mutual filter.
+pub const GLUE_ASSIGN_CONTRACT: &str = "matcher-lightglue-assign-v1";
 /// A dense matcher (DKM, RoMa): two images → warp and certainty ([`crate::dense`]).
 pub const DENSE_WARP_CONTRACT: &str = "dense-warp-v1";
 
@@ -180,6 +186,85 @@ pub(crate) const LIGHTERGLUE_SPEC: ContractSpec = ContractSpec {
         "affcorr.keypoint_normalisation",
         "affcorr.min_conf",
     ],
+};
+
+const fn t(name: &'static str, ty: TensorElementType, rank: usize) -> TensorSpec {
+    TensorSpec {
+        name,
+        ty,
+        rank,
+        fixed: &[(0, 1)],
+    }
+}
+
+/// Metadata every LightGlue piece carries.
+const GLUE_META: [&str; 5] = [
+    "affcorr.descriptor_dim",
+    "affcorr.embedding_dim",
+    "affcorr.heads",
+    "affcorr.head_dim",
+    "affcorr.layers",
+];
+
+pub(crate) const GLUE_ENCODE_SPEC: ContractSpec = ContractSpec {
+    name: GLUE_ENCODE_CONTRACT,
+    inputs: &[
+        TensorSpec {
+            name: "keypoints",
+            ty: F32,
+            rank: 3,
+            fixed: &[(0, 1), (2, 2)],
+        },
+        t("descriptors", F32, 3),
+    ],
+    outputs: &[t("desc", F32, 3), t("cos", F32, 3), t("sin", F32, 3)],
+    metadata: &[
+        GLUE_META[0],
+        GLUE_META[1],
+        GLUE_META[2],
+        GLUE_META[3],
+        GLUE_META[4],
+        "affcorr.keypoint_normalisation",
+    ],
+};
+
+pub(crate) const GLUE_LAYER_SPEC: ContractSpec = ContractSpec {
+    name: GLUE_LAYER_CONTRACT,
+    inputs: &[
+        t("layer", I64, 1),
+        t("desc0", F32, 3),
+        t("desc1", F32, 3),
+        t("cos0", F32, 3),
+        t("sin0", F32, 3),
+        t("cos1", F32, 3),
+        t("sin1", F32, 3),
+    ],
+    outputs: &[
+        t("desc0_out", F32, 3),
+        t("desc1_out", F32, 3),
+        t("token0", F32, 2),
+        t("token1", F32, 2),
+        t("match0", F32, 2),
+        t("match1", F32, 2),
+    ],
+    metadata: &[
+        GLUE_META[0],
+        GLUE_META[1],
+        GLUE_META[2],
+        GLUE_META[3],
+        GLUE_META[4],
+        "affcorr.min_conf",
+        "affcorr.glue.width_confidence",
+        "affcorr.glue.depth_confidence",
+        "affcorr.glue.confidence_thresholds",
+    ],
+};
+
+pub(crate) const GLUE_ASSIGN_SPEC: ContractSpec = ContractSpec {
+    name: GLUE_ASSIGN_CONTRACT,
+    inputs: &[t("layer", I64, 1), t("desc0", F32, 3), t("desc1", F32, 3)],
+    outputs: &[t("matches0", I64, 2), t("mscores0", F32, 2)],
+    metadata: &GLUE_META,
 };
 
 pub(crate) const DENSE_WARP_SPEC: ContractSpec = ContractSpec {

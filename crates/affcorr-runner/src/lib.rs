@@ -10,6 +10,8 @@
 //! - [`features`]: the XFeat backbone (`features-backbone-v1`) and sparse / semi-dense feature
 //!   extraction from its maps (the specification is `python/affcorr/export/xfeat_reference.py`).
 //! - [`matching`]: mutual nearest neighbours, the XFeat* refinement model and LighterGlue.
+//! - [`lightglue`]: LightGlue's adaptive layer loop (early exit, point pruning) over the
+//!   network exported in pieces; generic over sizes and layers.
 //! - [`dense`]: dense matchers (DKM, RoMa) under `dense-warp-v1` and DKM's balanced sampling
 //!   of matches from their certainty map.
 //! - [`contract`]: the matcher models' ONNX contracts (docs/matchers.md), checked on loading.
@@ -42,6 +44,7 @@ pub mod dense;
 pub mod error;
 pub mod estimator;
 pub mod features;
+pub mod lightglue;
 pub mod matcher;
 pub mod matching;
 pub mod ort_env;
@@ -55,8 +58,12 @@ pub use shape::{ShapeBins, ShapeModel, ShapeModelOptions, ShapeOutputs, ShapePre
 pub use contract::resolve_threads;
 pub use dense::{DenseMatcher, DenseSample, DenseWarp, SamplingOptions, balanced_sample};
 pub use features::{Backbone, BackboneConfig, BackboneMaps, DenseFeatures, SparseFeatures};
+pub use lightglue::{AdaptiveGlue, GlueConfig, GlueDims, GluePieceFiles, GlueTrace};
 pub use matcher::{
     FeatureData, ImageFeatures, Matcher, MatcherFiles, MatcherTimings, ModelRole, PointMatcher,
     PointMatches,
 };
-pub use matching::{GlueMatches, LighterGlue, MnnMatches, RefineModel, mutual_nearest_neighbours};
+pub use matching::{
+    GlueMatches, GlueMode, LighterGlue, LighterGlueOptions, MnnMatches, RefineModel,
+    mutual_nearest_neighbours,
+};

@@ -8,7 +8,8 @@
 //! - [`RefineModel`]: offsets and confidences of coarse semi-dense matches; [`refine_matches`]
 //!   moves the image-A point by offset · (1/s) and keeps confidence > 0.25.
 //! - [`LighterGlue`]: keypoints normalised by [`normalize_keypoints_lighterglue`], matches
-//!   `matches0 ≥ 0` with `mscores0 > min_conf`.
+//!   `matches0 ≥ 0` with `mscores0 > min_conf`; by default LightGlue's adaptive loop over the
+//!   network in pieces ([`crate::lightglue`]), else the one-graph network ([`GlueMode`]).
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -21,6 +22,7 @@ use rayon::prelude::*;
 
 use crate::contract::{self, CheckedModel, LIGHTERGLUE_SPEC, REFINE_SPEC};
 use crate::error::{Result, RunnerError};
+use crate::lightglue::{AdaptiveGlue, GlueConfig, GluePieceFiles, GlueTrace};
 
 /// Rows of the similarity matrix computed per block.
 const MNN_BLOCK: usize = 256;
@@ -281,10 +283,75 @@ pub struct GlueMatches {
     pub score: Vec<f32>,
 }
 
-/// LighterGlue, checked against `matcher-lighterglue-v1`.
+/// Which LighterGlue network runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GlueMode {
+    /// The pieces (`matcher-lightglue-*-v1`) with the adaptive layer loop in Rust
+    /// ([`crate::lightglue`]): early exit and point pruning.
+    Adaptive,
+    /// The one-graph network (`matcher-lighterglue-v1`): every layer, XFeat's pruning (width
+    /// 0.95) inside the graph.
+    Full,
+}
+
+/// How [`LighterGlue::load_with`] chooses its network; `None` fields take the defaults.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct LighterGlueOptions {
+    /// `None`: adaptive when the pieces lie beside the model file
+    /// ([`GluePieceFiles::beside`]), else the full graph.
+    pub mode: Option<GlueMode>,
+    /// The adaptive loop's early-exit rule (`None`: the pieces' metadata, 0.95; ≤ 0: off).
+    pub depth_confidence: Option<f32>,
+    /// The adaptive loop's pruning rule (`None`: the pieces' metadata, 0.95; ≤ 0: off).
+    pub width_confidence: Option<f32>,
+}
+
+impl LighterGlueOptions {
+    /// The environment's overrides, for benchmarks and parity checks without an API change:
+    /// `AFFCORR_LIGHTERGLUE` = `full` | `adaptive`, `AFFCORR_LIGHTERGLUE_DEPTH` and
+    /// `AFFCORR_LIGHTERGLUE_WIDTH` (numbers). Unset variables are `None`; bad values are
+    /// errors that name the variable.
+    pub fn from_env() -> Result<Self> {
+        let var = |key: &str| std::env::var(key).ok().filter(|v| !v.trim().is_empty());
+        let mode = match var("AFFCORR_LIGHTERGLUE").as_deref().map(str::trim) {
+            None => None,
+            Some(v) if v.eq_ignore_ascii_case("full") => Some(GlueMode::Full),
+            Some(v) if v.eq_ignore_ascii_case("adaptive") => Some(GlueMode::Adaptive),
+            Some(v) => {
+                return Err(RunnerError::invalid(
+                    "AFFCORR_LIGHTERGLUE",
+                    format!("{v:?} is neither \"full\" nor \"adaptive\""),
+                ));
+            }
+        };
+        let number = |key: &'static str| -> Result<Option<f32>> {
+            var(key)
+                .map(|v| {
+                    v.trim()
+                        .parse::<f32>()
+                        .map_err(|_| RunnerError::invalid(key, format!("{v:?} is not a number")))
+                })
+                .transpose()
+        };
+        Ok(Self {
+            mode,
+            depth_confidence: number("AFFCORR_LIGHTERGLUE_DEPTH")?,
+            width_confidence: number("AFFCORR_LIGHTERGLUE_WIDTH")?,
+        })
+    }
+}
+
+#[derive(Debug)]
+enum GlueNet {
+    Full(Mutex<Session>),
+    Adaptive(Box<AdaptiveGlue>, GlueConfig),
+}
+
+/// LighterGlue: the adaptive loop over its pieces (the default when they are shipped) or the
+/// full graph checked against `matcher-lighterglue-v1`.
 #[derive(Debug)]
 pub struct LighterGlue {
-    session: Mutex<Session>,
+    net: GlueNet,
     dim: usize,
     min_conf: f32,
     metadata: BTreeMap<String, String>,
@@ -292,10 +359,54 @@ pub struct LighterGlue {
 }
 
 impl LighterGlue {
-    /// Loads and checks a LighterGlue model (`threads` intra-op threads; `None`: every core).
+    /// Loads and checks a LighterGlue model (`threads` intra-op threads; `None`: every core):
+    /// the adaptive pieces beside `path` when they exist, else the full graph at `path`
+    /// ([`LighterGlueOptions::from_env`] can override either).
     pub fn load(path: impl AsRef<Path>, threads: Option<usize>) -> Result<Self> {
+        Self::load_with(path, threads, &LighterGlueOptions::from_env()?)
+    }
+
+    /// [`Self::load`] with explicit options (the environment is not read).
+    pub fn load_with(
+        path: impl AsRef<Path>,
+        threads: Option<usize>,
+        options: &LighterGlueOptions,
+    ) -> Result<Self> {
+        let path = path.as_ref();
+        let pieces = GluePieceFiles::beside(path);
+        let mode = options.mode.unwrap_or(if pieces.exist() {
+            GlueMode::Adaptive
+        } else {
+            GlueMode::Full
+        });
+        match mode {
+            GlueMode::Full => Self::load_full(path, threads),
+            GlueMode::Adaptive => {
+                contract::check_model_file(path)?;
+                for p in [&pieces.encode, &pieces.layer, &pieces.assign] {
+                    contract::check_model_file(p)?;
+                }
+                let glue = AdaptiveGlue::load(&pieces, threads)?;
+                let d = glue.default_config();
+                let config = GlueConfig {
+                    depth_confidence: options.depth_confidence.unwrap_or(d.depth_confidence),
+                    width_confidence: options.width_confidence.unwrap_or(d.width_confidence),
+                };
+                config.validate()?;
+                Ok(Self {
+                    dim: glue.dims().input_dim,
+                    min_conf: glue.min_conf(),
+                    metadata: glue.metadata().clone(),
+                    source: glue.source().to_string(),
+                    net: GlueNet::Adaptive(Box::new(glue), config),
+                })
+            }
+        }
+    }
+
+    fn load_full(path: &Path, threads: Option<usize>) -> Result<Self> {
         let threads = contract::resolve_threads(threads)?;
-        let model = contract::load(path.as_ref(), threads, &LIGHTERGLUE_SPEC)?;
+        let model = contract::load(path, threads, &LIGHTERGLUE_SPEC)?;
         let dim = model.meta_usize(&LIGHTERGLUE_SPEC, "affcorr.descriptor_dim")?;
         let min_conf = model.meta_f64(&LIGHTERGLUE_SPEC, "affcorr.min_conf", |c| {
             (0.0..1.0).contains(&c)
@@ -306,7 +417,7 @@ impl LighterGlue {
             source,
         } = model;
         Ok(Self {
-            session: Mutex::new(session),
+            net: GlueNet::Full(Mutex::new(session)),
             dim,
             min_conf,
             metadata,
@@ -324,12 +435,28 @@ impl LighterGlue {
         self.min_conf
     }
 
-    /// All custom metadata.
+    /// Which network runs.
+    pub fn mode(&self) -> GlueMode {
+        match self.net {
+            GlueNet::Full(_) => GlueMode::Full,
+            GlueNet::Adaptive(..) => GlueMode::Adaptive,
+        }
+    }
+
+    /// The adaptive loop's rules (`None` for the full graph).
+    pub fn config(&self) -> Option<GlueConfig> {
+        match &self.net {
+            GlueNet::Full(_) => None,
+            GlueNet::Adaptive(_, c) => Some(*c),
+        }
+    }
+
+    /// All custom metadata (the layer model's for the adaptive network).
     pub fn metadata(&self) -> &BTreeMap<String, String> {
         &self.metadata
     }
 
-    /// The model's file path in backquotes.
+    /// The model's file path in backquotes (the layer model's for the adaptive network).
     pub fn source(&self) -> &str {
         &self.source
     }
@@ -346,65 +473,96 @@ impl LighterGlue {
         desc1: &[f32],
         min_conf: f32,
     ) -> Result<GlueMatches> {
-        let d = self.dim;
-        let (m, n) = (kpts0.len() / 2, kpts1.len() / 2);
-        for (what, k, desc) in [("kpts0", kpts0, desc0), ("kpts1", kpts1, desc1)] {
-            if k.len() % 2 != 0 || desc.len() != k.len() / 2 * d {
-                return Err(RunnerError::invalid(
-                    what,
-                    format!(
-                        "{} keypoint values with {} descriptor values (D = {d})",
-                        k.len(),
-                        desc.len()
-                    ),
-                ));
-            }
-        }
-        if m == 0 || n == 0 {
-            return Ok(GlueMatches::default());
-        }
-        let wrap = |shape: [usize; 3], data, what| {
-            TensorRef::from_array_view((shape, data))
-                .map_err(|e| RunnerError::ort(format!("wrapping {what}"), e))
-        };
-        let inputs = ort::inputs![
-            "keypoints0" => wrap([1, m, 2], kpts0, "keypoints0")?,
-            "keypoints1" => wrap([1, n, 2], kpts1, "keypoints1")?,
-            "descriptors0" => wrap([1, m, d], desc0, "descriptors0")?,
-            "descriptors1" => wrap([1, n, d], desc1, "descriptors1")?,
-        ];
-        let options = RunOptions::new()
-            .map_err(|e| RunnerError::ort("creating run options", e))?
-            .with_outputs(
-                OutputSelector::no_default()
-                    .with("matches0")
-                    .with("mscores0"),
-            );
-        let mut session = self
-            .session
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner());
-        let outputs = session
-            .run_with_options(inputs, &options)
-            .map_err(|e| RunnerError::ort("running LighterGlue", e))?;
-        let m0 = contract::output::<i64>(&outputs, "matches0", &[1, m as i64])?;
-        let s0 = contract::output::<f32>(&outputs, "mscores0", &[1, m as i64])?;
-        let mut out = GlueMatches::default();
-        for (i, (&j, &s)) in m0.iter().zip(s0).enumerate() {
-            if j >= 0 && s > min_conf {
-                if j as usize >= n {
-                    return Err(RunnerError::ModelOutput {
-                        what: "matches0",
-                        reason: format!("row {i} matches keypoint {j} of {n}"),
-                    });
-                }
-                out.idx0.push(i);
-                out.idx1.push(j as usize);
-                out.score.push(s);
-            }
-        }
-        Ok(out)
+        self.run_traced(kpts0, desc0, kpts1, desc1, min_conf)
+            .map(|(m, _)| m)
     }
+
+    /// [`Self::run`] with what the adaptive loop did (`None` for the full graph).
+    pub fn run_traced(
+        &self,
+        kpts0: &[f32],
+        desc0: &[f32],
+        kpts1: &[f32],
+        desc1: &[f32],
+        min_conf: f32,
+    ) -> Result<(GlueMatches, Option<GlueTrace>)> {
+        match &self.net {
+            GlueNet::Full(session) => {
+                run_full(session, self.dim, kpts0, desc0, kpts1, desc1, min_conf).map(|m| (m, None))
+            }
+            GlueNet::Adaptive(glue, config) => glue
+                .run(kpts0, desc0, kpts1, desc1, min_conf, config)
+                .map(|(m, t)| (m, Some(t))),
+        }
+    }
+}
+
+/// The full graph (`matcher-lighterglue-v1`).
+fn run_full(
+    session: &Mutex<Session>,
+    d: usize,
+    kpts0: &[f32],
+    desc0: &[f32],
+    kpts1: &[f32],
+    desc1: &[f32],
+    min_conf: f32,
+) -> Result<GlueMatches> {
+    let (m, n) = (kpts0.len() / 2, kpts1.len() / 2);
+    for (what, k, desc) in [("kpts0", kpts0, desc0), ("kpts1", kpts1, desc1)] {
+        if k.len() % 2 != 0 || desc.len() != k.len() / 2 * d {
+            return Err(RunnerError::invalid(
+                what,
+                format!(
+                    "{} keypoint values with {} descriptor values (D = {d})",
+                    k.len(),
+                    desc.len()
+                ),
+            ));
+        }
+    }
+    if m == 0 || n == 0 {
+        return Ok(GlueMatches::default());
+    }
+    let wrap = |shape: [usize; 3], data, what| {
+        TensorRef::from_array_view((shape, data))
+            .map_err(|e| RunnerError::ort(format!("wrapping {what}"), e))
+    };
+    let inputs = ort::inputs![
+        "keypoints0" => wrap([1, m, 2], kpts0, "keypoints0")?,
+        "keypoints1" => wrap([1, n, 2], kpts1, "keypoints1")?,
+        "descriptors0" => wrap([1, m, d], desc0, "descriptors0")?,
+        "descriptors1" => wrap([1, n, d], desc1, "descriptors1")?,
+    ];
+    let options = RunOptions::new()
+        .map_err(|e| RunnerError::ort("creating run options", e))?
+        .with_outputs(
+            OutputSelector::no_default()
+                .with("matches0")
+                .with("mscores0"),
+        );
+    let mut session = session
+        .lock()
+        .unwrap_or_else(|poisoned| poisoned.into_inner());
+    let outputs = session
+        .run_with_options(inputs, &options)
+        .map_err(|e| RunnerError::ort("running LighterGlue", e))?;
+    let m0 = contract::output::<i64>(&outputs, "matches0", &[1, m as i64])?;
+    let s0 = contract::output::<f32>(&outputs, "mscores0", &[1, m as i64])?;
+    let mut out = GlueMatches::default();
+    for (i, (&j, &s)) in m0.iter().zip(s0).enumerate() {
+        if j >= 0 && s > min_conf {
+            if j as usize >= n {
+                return Err(RunnerError::ModelOutput {
+                    what: "matches0",
+                    reason: format!("row {i} matches keypoint {j} of {n}"),
+                });
+            }
+            out.idx0.push(i);
+            out.idx1.push(j as usize);
+            out.score.push(s);
+        }
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

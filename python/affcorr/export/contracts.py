@@ -20,6 +20,11 @@ code path from it. The contracts (docs/matchers.md has the full text):
     (1, M, N) log assignment (without dustbins), ``matches0`` (1, M) int64 mutual best match in
     image 1 or −1, ``mscores0`` (1, M) its exp(score) (0 when not mutual); a match is kept when
     ``matches0 ≥ 0`` and ``mscores0 > min_conf``.
+``matcher-lightglue-encode-v1``, ``matcher-lightglue-layer-v1``, ``matcher-lightglue-assign-v1``
+    LightGlue in pieces for the adaptive layer loop (input projection + positional encoding; one
+    transformer layer chosen by the input ``layer`` with its token-confidence and matchability
+    heads; the assignment of a layer): :mod:`affcorr.export.lightglue_pieces` and
+    docs/matchers.md.
 ``dense-warp-v1``
     inputs ``image_a``, ``image_b`` float32 (1, 3, H, W) RGB in [0, 1]; outputs ``warp``
     (1, H', W', 2) position in B of each pixel of A in normalised [−1, 1] coordinates
@@ -40,7 +45,18 @@ from typing import Any
 BACKBONE = "features-backbone-v1"
 REFINE = "features-refine-v1"
 LIGHTERGLUE = "matcher-lighterglue-v1"
+GLUE_ENCODE = "matcher-lightglue-encode-v1"
+GLUE_LAYER = "matcher-lightglue-layer-v1"
+GLUE_ASSIGN = "matcher-lightglue-assign-v1"
 DENSE_WARP = "dense-warp-v1"
+
+_GLUE_META = [
+    "affcorr.descriptor_dim",
+    "affcorr.embedding_dim",
+    "affcorr.heads",
+    "affcorr.head_dim",
+    "affcorr.layers",
+]
 
 # name -> (inputs, outputs, required metadata keys besides affcorr.contract); each input/output is
 # (name, rank, {axis: fixed size}).
@@ -84,6 +100,42 @@ CONTRACTS: dict[str, dict[str, Any]] = {
             "affcorr.keypoint_normalisation",
             "affcorr.min_conf",
         ],
+    },
+    GLUE_ENCODE: {
+        "inputs": [("keypoints", 3, {0: 1, 2: 2}), ("descriptors", 3, {0: 1})],
+        "outputs": [("desc", 3, {0: 1}), ("cos", 3, {0: 1}), ("sin", 3, {0: 1})],
+        "metadata": [*_GLUE_META, "affcorr.keypoint_normalisation"],
+    },
+    GLUE_LAYER: {
+        "inputs": [
+            ("layer", 1, {0: 1}),
+            ("desc0", 3, {0: 1}),
+            ("desc1", 3, {0: 1}),
+            ("cos0", 3, {0: 1}),
+            ("sin0", 3, {0: 1}),
+            ("cos1", 3, {0: 1}),
+            ("sin1", 3, {0: 1}),
+        ],
+        "outputs": [
+            ("desc0_out", 3, {0: 1}),
+            ("desc1_out", 3, {0: 1}),
+            ("token0", 2, {0: 1}),
+            ("token1", 2, {0: 1}),
+            ("match0", 2, {0: 1}),
+            ("match1", 2, {0: 1}),
+        ],
+        "metadata": [
+            *_GLUE_META,
+            "affcorr.min_conf",
+            "affcorr.glue.width_confidence",
+            "affcorr.glue.depth_confidence",
+            "affcorr.glue.confidence_thresholds",
+        ],
+    },
+    GLUE_ASSIGN: {
+        "inputs": [("layer", 1, {0: 1}), ("desc0", 3, {0: 1}), ("desc1", 3, {0: 1})],
+        "outputs": [("matches0", 2, {0: 1}), ("mscores0", 2, {0: 1})],
+        "metadata": _GLUE_META,
     },
     DENSE_WARP: {
         "inputs": [("image_a", 4, {0: 1, 1: 3}), ("image_b", 4, {0: 1, 1: 3})],
