@@ -12,9 +12,10 @@ use std::path::PathBuf;
 
 use crate::arrays::{Dim, F64Array, flatten, to_numpy};
 use crate::errors::image_error;
+use affcorr::image::confidence::{FEATURE_NAMES, FEATURES};
 use affcorr::image::{
-    AffineRefineOptions, GrayImage, ImageError, PixelData, extract_patches as extract,
-    refine_affine,
+    AcConfidence, AffineRefineOptions, AffineRefinement, ConfidenceModel, GrayImage, ImageError,
+    PixelData, extract_patches as extract, refine_affine,
 };
 use numpy::ndarray::{ArrayD, IxDyn};
 use numpy::{IntoPyArray, PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
@@ -26,7 +27,68 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(extract_patches, m)?)?;
     m.add_function(wrap_pyfunction!(read_gray_image, m)?)?;
     m.add_function(wrap_pyfunction!(refine_affine_py, m)?)?;
+    m.add_function(wrap_pyfunction!(confidence_model, m)?)?;
     Ok(())
+}
+
+/// The per-AC confidence (and the refinement's report, when there is one) as numpy arrays:
+/// `affine_confidence` (N,), `reliable` (N,) bool, `confidence_features` (N, F),
+/// `confidence_model` (str); with a refinement also `status` (list of str), `refined` (N,) bool,
+/// `zncc`, `shift_std`, `affine_std` (N,).
+pub fn confidence_dict<'py>(
+    py: Python<'py>,
+    conf: AcConfidence,
+    refinement: Option<AffineRefinement>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    let n = conf.confidence.len();
+    d.set_item("affine_confidence", f64_vec(py, conf.confidence)?)?;
+    d.set_item("reliable", bool_vec(py, conf.reliable)?)?;
+    d.set_item(
+        "confidence_features",
+        to_numpy(py, &[n, FEATURES], flatten(conf.features))?,
+    )?;
+    d.set_item("confidence_model", conf.model.name())?;
+    if let Some(r) = refinement {
+        let status: Vec<&str> = r.status.iter().map(|s| s.name()).collect();
+        d.set_item("status", status)?;
+        d.set_item("refined", bool_vec(py, r.refined)?)?;
+        d.set_item("zncc", f64_vec(py, r.zncc)?)?;
+        d.set_item("shift_std", f64_vec(py, r.shift_std)?)?;
+        d.set_item("affine_std", f64_vec(py, r.affine_std)?)?;
+    }
+    Ok(d)
+}
+
+/// A (N,) bool array.
+pub fn bool_vec(py: Python<'_>, v: Vec<bool>) -> PyResult<Bound<'_, PyArrayDyn<bool>>> {
+    let n = v.len();
+    ArrayD::from_shape_vec(IxDyn(&[n]), v)
+        .map(|a| a.into_pyarray(py))
+        .map_err(|e| PyRuntimeError::new_err(format!("internal shape error: {e}")))
+}
+
+/// `(weights (F,), threshold, feature names)` of a confidence model: `"network"`,
+/// `"refinement"` or `"network_refinement"`.
+#[pyfunction]
+fn confidence_model<'py>(
+    py: Python<'py>,
+    name: &str,
+) -> PyResult<(F64<'py>, f64, Vec<&'static str>)> {
+    let model = ConfidenceModel::ALL
+        .into_iter()
+        .find(|m| m.name() == name)
+        .ok_or_else(|| {
+            PyValueError::new_err(format!(
+                "name must be one of {:?}, got {name:?}",
+                ConfidenceModel::ALL.map(|m| m.name())
+            ))
+        })?;
+    Ok((
+        f64_vec(py, model.weights().to_vec())?,
+        model.threshold(),
+        FEATURE_NAMES.to_vec(),
+    ))
 }
 
 type F64<'py> = Bound<'py, PyArrayDyn<f64>>;
@@ -141,7 +203,7 @@ fn read_gray_image<'py>(py: Python<'py>, image: &Bound<'py, PyAny>) -> PyResult<
 }
 
 /// Affine Lucas–Kanade refinement of ACs; see `affcorr.refine_affine` for the documentation.
-/// Returns `(corrs (N, 8), refined (N,) bool, zncc (N,))`.
+/// Returns `(corrs (N, 8), report)`, the report as [`confidence_dict`] gives it.
 #[pyfunction]
 #[pyo3(name = "refine_affine")]
 #[pyo3(signature = (
@@ -161,7 +223,7 @@ fn refine_affine_py<'py>(
     move_points: bool,
     try_identity: bool,
     max_shift_std: f64,
-) -> PyResult<(F64<'py>, Bound<'py, PyArrayDyn<bool>>, F64<'py>)> {
+) -> PyResult<(F64<'py>, Bound<'py, PyDict>)> {
     let rows = F64Array::extract(corrs, "corrs")?
         .expect(&[N, Dim::Is(8)])?
         .rows::<8>()
@@ -181,11 +243,10 @@ fn refine_affine_py<'py>(
         crate::interrupt::interruptible(py, |_| refine_affine(&img_a, &img_b, &rows, &options))?
             .map_err(|e| image_error(e, None))?;
     let n = r.corrs.len();
-    let refined = ArrayD::from_shape_vec(IxDyn(&[n]), r.refined)
-        .map_err(|e| PyRuntimeError::new_err(format!("internal shape error: {e}")))?;
-    Ok((
-        to_numpy(py, &[n, 8], flatten(r.corrs))?,
-        refined.into_pyarray(py),
-        f64_vec(py, r.zncc)?,
-    ))
+    // The same confidence as r.affine_confidence, with its features.
+    let conf = affcorr::image::affine_confidence(&r.corrs, None, Some(&r))
+        .map_err(|e| image_error(e, None))?;
+    let corrs = to_numpy(py, &[n, 8], flatten(r.corrs.clone()))?;
+    let report = confidence_dict(py, conf, Some(r))?;
+    Ok((corrs, report))
 }

@@ -138,6 +138,8 @@ type MatchTuple<'py> = (
     Bound<'py, PyDict>,
     (usize, usize),
     Bound<'py, PyList>,
+    Bound<'py, PyAny>,
+    Bound<'py, PyAny>,
 );
 
 /// The view cascade's report: one dict per view tried (`label`, `image` "A" | "B" | None,
@@ -171,7 +173,7 @@ fn view_reports<'py>(py: Python<'py>, m: &Matches) -> PyResult<Bound<'py, PyList
 }
 
 /// `(corrs (N, 8), certainty (N,), timings {stage: seconds}, (keypoints A, keypoints B),
-/// views [report per view])`.
+/// views [report per view], affine_confidence (N,), reliable (N,) bool)`.
 fn match_tuple<'py>(
     py: Python<'py>,
     m: Matches,
@@ -192,6 +194,8 @@ fn match_tuple<'py>(
         d,
         m.num_keypoints,
         views,
+        to_numpy(py, &[n], m.affine_confidence)?.into_any(),
+        crate::image::bool_vec(py, m.reliable)?.into_any(),
     ))
 }
 
@@ -208,7 +212,8 @@ impl PipelineRunner {
         *, matcher, shape_model, backbone_model = None, refine_model = None,
         lighterglue_model = None, dense_model = None, ort_library = None, max_keypoints = None,
         max_matches = None, max_side = None, threads = None, seed = None,
-        refine_affine = defaults::REFINE_AFFINE, views = None, view_budget = None,
+        refine_affine = defaults::REFINE_AFFINE, drop_unreliable = false,
+        views = None, view_budget = None,
         max_views = None
     ))]
     #[allow(clippy::too_many_arguments)]
@@ -227,6 +232,7 @@ impl PipelineRunner {
         threads: Option<&Bound<'_, PyAny>>,
         seed: Option<&Bound<'_, PyAny>>,
         refine_affine: bool,
+        drop_unreliable: bool,
         views: Option<&str>,
         view_budget: Option<f64>,
         max_views: Option<&Bound<'_, PyAny>>,
@@ -282,6 +288,7 @@ impl PipelineRunner {
             b = b.threads(to_usize(n));
         }
         b = b.affine_refinement(refine_affine.then(AffineRefineOptions::default));
+        b = b.drop_unreliable(drop_unreliable);
         let mut view_options = ViewOptions::default();
         if let Some(mode) = views {
             view_options.mode = mode.parse().map_err(|e| pipeline_error(e, None))?;

@@ -14,10 +14,10 @@
 use std::path::PathBuf;
 
 use crate::arrays::{flatten, opt_int_option, to_numpy, to_usize};
-use crate::errors::{image_error, runner_error};
-use crate::image::{f32_array, f64_vec, gray_image, points};
+use crate::errors::runner_error;
+use crate::image::{confidence_dict, f32_array, f64_vec, gray_image, points};
 use crate::interrupt::interruptible;
-use affcorr::image::{AffineRefineOptions, refine_affine};
+use affcorr::image::AffineRefineOptions;
 use affcorr::runner::contract::MAX_THREADS;
 use affcorr::runner::shape::MAX_BATCH_SIZE;
 use affcorr::runner::{
@@ -170,9 +170,10 @@ impl ShapeRunner {
         Ok(out)
     }
 
-    /// `(corrs (N, 8), orientation_a, orientation_b, scale_a, scale_b, residual_shape (N, 3))`;
-    /// with `refine`, the corrs refined by `refine_affine` (default options) on the same
-    /// decoded images.
+    /// `(corrs (N, 8), orientation_a, orientation_b, scale_a, scale_b, residual_shape (N, 3),
+    /// report)`; with `refine`, the corrs refined by `refine_affine` (default options) on the
+    /// same decoded images. The report (`image::confidence_dict`) has the confidence, and the
+    /// network's `angle_spread` and `scale_spread` (N,).
     #[pyo3(signature = (image_a, image_b, x1, x2, refine = false))]
     #[allow(clippy::type_complexity)]
     fn estimate<'py>(
@@ -183,7 +184,15 @@ impl ShapeRunner {
         x1: &Bound<'py, PyAny>,
         x2: &Bound<'py, PyAny>,
         refine: bool,
-    ) -> PyResult<(F64<'py>, F64<'py>, F64<'py>, F64<'py>, F64<'py>, F64<'py>)> {
+    ) -> PyResult<(
+        F64<'py>,
+        F64<'py>,
+        F64<'py>,
+        F64<'py>,
+        F64<'py>,
+        F64<'py>,
+        Bound<'py, PyDict>,
+    )> {
         let x1 = points(x1, "x1")?;
         let x2 = points(x2, "x2")?;
         if x1.len() != x2.len() {
@@ -196,19 +205,23 @@ impl ShapeRunner {
         let img_a = gray_image(py, image_a, "image_a")?;
         let img_b = gray_image(py, image_b, "image_b")?;
         let e = interruptible(py, |_| -> PyResult<_> {
-            let mut e = self
-                .inner
-                .estimate(&img_a, &img_b, &x1, &x2)
-                .map_err(|e| runner_error(e, None))?;
             if refine {
                 let options = AffineRefineOptions::default();
-                e.corrs = refine_affine(&img_a, &img_b, &e.corrs, &options)
-                    .map_err(|e| image_error(e, None))?
-                    .corrs;
+                self.inner
+                    .estimate_refined(&img_a, &img_b, &x1, &x2, &options)
+                    .map_err(|e| runner_error(e, None))
+            } else {
+                self.inner
+                    .estimate(&img_a, &img_b, &x1, &x2)
+                    .map_err(|e| runner_error(e, None))
             }
-            Ok(e)
         })??;
         let n = e.corrs.len();
+        let (angle, scale): (Vec<f64>, Vec<f64>) =
+            e.spread.iter().map(|s| (s.angle, s.scale)).unzip();
+        let report = confidence_dict(py, e.confidence, e.refinement)?;
+        report.set_item("angle_spread", f64_vec(py, angle)?)?;
+        report.set_item("scale_spread", f64_vec(py, scale)?)?;
         Ok((
             to_numpy(py, &[n, 8], flatten(e.corrs))?,
             f64_vec(py, e.orientation_a)?,
@@ -216,6 +229,7 @@ impl ShapeRunner {
             f64_vec(py, e.scale_a)?,
             f64_vec(py, e.scale_b)?,
             to_numpy(py, &[n, 3], flatten(e.residual_shape))?,
+            report,
         ))
     }
 

@@ -261,10 +261,14 @@ class ShapeRunner:
         NDArray[np.float64],
         NDArray[np.float64],
         NDArray[np.float64],
+        dict[str, Any],
     ]:
         """Images (path or array) and matches x1, x2 (N, 2) -> (corrs (N, 8), orientation_a,
-        orientation_b, scale_a, scale_b (N,), residual_shape (N, 3)), with
-        A = (S_B / S_A) R(O_B - O_A) A'(A'')."""
+        orientation_b, scale_a, scale_b (N,), residual_shape (N, 3), report), with
+        A = (S_B / S_A) R(O_B - O_A) A'(A''); with refine, corrs refined (default options).
+        report: affine_confidence, reliable (N,), confidence_features (N, F),
+        confidence_model, angle_spread, scale_spread (N,); with refine also status (list of
+        str), refined, zncc, shift_std, affine_std (N,)."""
     @property
     def angle_bins(self) -> NDArray[np.float64]: ...
     @property
@@ -303,9 +307,10 @@ def refine_affine(
     move_points: bool,
     try_identity: bool,
     max_shift_std: float,
-) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
+) -> tuple[NDArray[np.float64], dict[str, Any]]:
     """Affine Lucas-Kanade refinement of ACs (wrapped by affcorr.refine_affine): (corrs (N, 8),
-    refined (N,) bool, zncc (N,))."""
+    report): refined (N,) bool, status (list of str), zncc, shift_std, affine_std,
+    affine_confidence (N,), reliable (N,) bool, confidence_features (N, F), confidence_model."""
 
 # --- end-to-end pipeline (wrapped by affcorr.pipeline) -------------------------------------------
 
@@ -315,7 +320,13 @@ _MatchTuple = tuple[
     dict[str, float],
     tuple[int, int],
     list[dict[str, Any]],
+    NDArray[np.float64],
+    NDArray[np.bool_],
 ]
+
+def confidence_model(name: str) -> tuple[NDArray[np.float64], float, list[str]]:
+    """(weights (F,), threshold, feature names) of the calibrated confidence model "network",
+    "refinement" or "network_refinement"."""
 
 #: The pipeline's one set of defaults (affcorr-pipeline's `defaults` module).
 PIPELINE_DEFAULTS: dict[str, Any]
@@ -350,6 +361,7 @@ class PipelineRunner:
         threads: int | None = None,
         seed: int | None = None,
         refine_affine: bool = ...,
+        drop_unreliable: bool = False,
         views: str | None = None,
         view_budget: float | None = None,
         max_views: int | None = None,

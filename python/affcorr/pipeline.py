@@ -109,6 +109,13 @@ class MatchResult:
             view cascade: verification and synthetic views, whose own stages are counted in
             the stages above too), ``ransac`` (0 unless estimated), ``total``.
         num_keypoints: keypoints (or semi-dense cells) found in image A and in image B.
+        affine_confidence: ``(N,)`` float64 in [0, 1], the calibrated probability that each
+            AC's A is good (cosine with the true A >= 0.9), from the shape network's spread,
+            the refinement's outcome and the neighbouring ACs (docs/shape_network.md,
+            "Confidence").
+        reliable: ``(N,)`` bool, ``affine_confidence`` at least the calibrated threshold; an
+            AC whose refinement failed is never reliable. ``drop_unreliable=True`` keeps only
+            these.
         views: the view cascade's report, one dict per view tried, the plain pair first
             (``label``, ``image`` "A" / "B" / None, ``rotation`` and ``tilt_angle`` in
             radians, ``scale``, ``tilt``, ``guided``, ``matches``, ``inliers``, ``verified``,
@@ -121,6 +128,8 @@ class MatchResult:
     timings: dict[str, float]
     num_keypoints: tuple[int, int]
     views: list[dict[str, Any]] = field(default_factory=list)
+    affine_confidence: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    reliable: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
 
     @property
     def view(self) -> dict[str, Any] | None:
@@ -190,6 +199,8 @@ class Pipeline:
             effect is measured in benches/results/eval/affine.md and
             benches/results/pose_refine.md. It costs a few times the shape network (timed as
             ``affine_refine``); ``False`` gives the network's ACs alone.
+        drop_unreliable: return only the ACs flagged reliable (:attr:`MatchResult.reliable`),
+            for callers that need trustworthy A (default False: every AC, each flagged).
 
     Every model's ONNX contract is checked on loading.
 
@@ -215,6 +226,7 @@ class Pipeline:
         dense_model: str | os.PathLike[str] | None = None,
         seed: int = _D["seed"],
         refine_affine: bool = _D["refine_affine"],
+        drop_unreliable: bool = False,
         views: str = _D["views"],
         view_budget: float | None = None,
         max_views: int | None = None,
@@ -267,6 +279,7 @@ class Pipeline:
             threads=threads,
             seed=int(seed),
             refine_affine=bool(refine_affine),
+            drop_unreliable=bool(drop_unreliable),
             views=views,
             view_budget=view_budget,
             max_views=_positive(max_views, "max_views"),

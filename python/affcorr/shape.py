@@ -37,7 +37,9 @@ __all__ = [
     "AffineRefinement",
     "ShapeEstimate",
     "ShapeEstimator",
+    "REFINE_STATUSES",
     "bundled_shape_model",
+    "confidence_model",
     "extract_patches",
     "find_ort_library",
     "read_gray_image",
@@ -105,9 +107,31 @@ def find_ort_library() -> Path | None:
     )
 
 
+#: What :func:`refine_affine` can report per AC: ``"refined"``, or why the input came back
+#: (a flat window, a fit that diverged, a ZNCC under ``min_zncc``, no better than the input's,
+#: or an ill-determined shift along a lone edge).
+REFINE_STATUSES = ("refined", "flat", "diverged", "low_zncc", "not_improved", "aperture")
+
+
+def confidence_model(name: str) -> tuple[NDArray[np.float64], float, list[str]]:
+    """The calibrated logistic model behind ``affine_confidence``: ``(weights, threshold,
+    feature names)``; ``name`` is ``"network"`` (the network's ACs alone), ``"refinement"``
+    (:func:`refine_affine` on any ACs) or ``"network_refinement"`` (the default output).
+
+    ``affine_confidence = 1 / (1 + exp(-features @ weights))`` and ``reliable =
+    affine_confidence >= threshold``, with the ``confidence_features`` every result carries
+    (docs/shape_network.md, "Confidence").
+    """
+    if not isinstance(name, str):
+        raise ValueError(f"name must be a str, got {name!r}")
+    weights, threshold, names = _native.confidence_model(name)
+    return weights, float(threshold), list(names)
+
+
 @dataclass(frozen=True)
 class ShapeEstimate:
-    """ACs with the per-patch quantities they were built from (all float64)."""
+    """ACs with the per-patch quantities they were built from (all float64), and how far each
+    AC can be trusted."""
 
     #: (N, 8) rows [x1, y1, x2, y2, a11, a12, a21, a22], A = dx2/dx1.
     corrs: NDArray[np.float64]
@@ -121,6 +145,27 @@ class ShapeEstimate:
     scale_b: NDArray[np.float64]
     #: (N, 3) residual shape A'' = (x0, x1, x2) of each pair.
     residual_shape: NDArray[np.float64]
+    #: (N,) in [0, 1]: the calibrated probability that the AC's A is good (cosine similarity
+    #: with the true A >= 0.9), from the network's spread, the refinement (with ``refine``)
+    #: and the neighbouring ACs (docs/shape_network.md, "Confidence").
+    affine_confidence: NDArray[np.float64]
+    #: (N,) bool: ``affine_confidence`` at least the model's calibrated threshold.
+    reliable: NDArray[np.bool_]
+    #: (N,) the network's angular spread, sum over both patches of 1 - R (R the mean
+    #: resultant length of the angle distribution; 0 = certain).
+    angle_spread: NDArray[np.float64]
+    #: (N,) the network's log-scale spread, sqrt(Var_a ln S + Var_b ln S).
+    scale_spread: NDArray[np.float64]
+    #: (N, F) the confidence's inputs (:func:`confidence_model` names them).
+    confidence_features: NDArray[np.float64]
+    #: ``"network"`` or ``"network_refinement"``: the model the confidence came from.
+    confidence_model: str
+    #: (N,) str: the refinement's outcome per AC (:data:`REFINE_STATUSES`); None without
+    #: ``refine``.
+    status: NDArray[np.str_] | None = None
+    #: (N,) the refinement's final ZNCC per AC (the input's where it failed); None without
+    #: ``refine``.
+    zncc: NDArray[np.float64] | None = None
 
 
 class ShapeEstimator:
@@ -226,11 +271,32 @@ class ShapeEstimator:
         x1: ArrayLike,
         x2: ArrayLike,
         *,
+        refine: bool = False,
         channel_order: str = "rgb",
     ) -> ShapeEstimate:
-        """Like :meth:`estimate`, with the per-patch orientations, scales and residual shapes."""
+        """Like :meth:`estimate`, with the per-patch orientations, scales and residual shapes,
+        and each AC's ``affine_confidence`` and ``reliable`` flag.
+
+        ``refine=False`` (the default here, unlike :meth:`estimate`) gives the network's ACs
+        alone, scored by the network's own spread and the agreement of neighbouring ACs;
+        ``refine=True`` refines them (:func:`refine_affine`, defaults) and scores them with
+        the refinement's outcome as well (``status`` and ``zncc`` per AC): an AC whose
+        refinement failed keeps the network's A and is flagged unreliable.
+        """
         a, b = as_rgb(image_a, channel_order), as_rgb(image_b, channel_order)
-        return ShapeEstimate(*self._runner.estimate(a, b, as_xy(x1), as_xy(x2), False))
+        *arrays, report = self._runner.estimate(a, b, as_xy(x1), as_xy(x2), bool(refine))
+        status = report.get("status")
+        return ShapeEstimate(
+            *arrays,
+            affine_confidence=report["affine_confidence"],
+            reliable=report["reliable"],
+            angle_spread=report["angle_spread"],
+            scale_spread=report["scale_spread"],
+            confidence_features=report["confidence_features"],
+            confidence_model=report["confidence_model"],
+            status=None if status is None else np.asarray(status, dtype=str),
+            zncc=report.get("zncc"),
+        )
 
     def predict(
         self, patches_a: ArrayLike, patches_b: ArrayLike, *, return_logits: bool = False
@@ -292,6 +358,21 @@ class AffineRefinement:
     refined: NDArray[np.bool_]
     #: (N,) weighted ZNCC of each returned AC's windows at the finest level (NaN if flat).
     zncc: NDArray[np.float64]
+    #: (N,) str: ``"refined"``, or why the input came back (:data:`REFINE_STATUSES`).
+    status: NDArray[np.str_]
+    #: (N,) the fitted shift's standard deviation (px, worst direction) from the Gauss-Newton
+    #: covariance; inf for a flat window.
+    shift_std: NDArray[np.float64]
+    #: (N,) the expected ||dA||_F of the returned A from the same covariance.
+    affine_std: NDArray[np.float64]
+    #: (N,) in [0, 1]: the calibrated probability that the returned A is good (cosine with
+    #: the true A >= 0.9), from the refinement's outcome and the neighbouring ACs; low for a
+    #: returned input.
+    affine_confidence: NDArray[np.float64]
+    #: (N,) bool: ``affine_confidence`` at least the calibrated threshold.
+    reliable: NDArray[np.bool_]
+    #: (N, F) the confidence's inputs (:func:`confidence_model` ``("refinement")``).
+    confidence_features: NDArray[np.float64]
 
 
 def refine_affine(
@@ -318,7 +399,8 @@ def refine_affine(
     ``min_zncc``, and the fitted translation's standard deviation (from the Gauss-Newton
     matrix and the residual; pixels, worst direction) is at most ``max_shift_std``, which
     rejects windows on a lone edge, where any shift along it fits (the aperture problem);
-    otherwise the input row is returned. With ``move_points`` x2 becomes
+    otherwise the input row is returned, with ``status`` saying which check failed and a low
+    ``affine_confidence`` (never ``reliable``). With ``move_points`` x2 becomes
     ``x2 + t`` (A and t are fitted together); otherwise only A changes. With ``try_identity``
     the iterations start from A = I instead of the input's A wherever the identity matches
     better at the coarsest level (most image pairs are roughly upright). ``channel_order``:
@@ -345,7 +427,7 @@ def refine_affine(
         raise ValueError(
             f"blur_sigmas must be a sequence of numbers, got {blur_sigmas!r}"
         ) from None
-    out, refined, zncc = _native.refine_affine(
+    out, report = _native.refine_affine(
         as_rgb(image_a, channel_order),
         as_rgb(image_b, channel_order),
         corrs,
@@ -357,4 +439,14 @@ def refine_affine(
         max_shift_std=float(max_shift_std),
         try_identity=bool(try_identity),
     )
-    return AffineRefinement(out, refined, zncc)
+    return AffineRefinement(
+        out,
+        report["refined"],
+        report["zncc"],
+        status=np.asarray(report["status"], dtype=str),
+        shift_std=report["shift_std"],
+        affine_std=report["affine_std"],
+        affine_confidence=report["affine_confidence"],
+        reliable=report["reliable"],
+        confidence_features=report["confidence_features"],
+    )
