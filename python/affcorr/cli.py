@@ -107,6 +107,7 @@ def _pipeline(args):
         dense_model=args.dense_model,
         shape_model=args.shape_model,
         refine_affine=args.refine_affine,
+        drop_unreliable=args.drop_unreliable,
         views=args.views,
         view_budget=args.view_budget,
     )
@@ -146,6 +147,12 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
         default=PIPELINE_DEFAULTS["refine_affine"],
         help="refine the ACs against the images by affine Lucas-Kanade (affcorr.refine_affine; "
         "default: %(default)s)",
+    )
+    p.add_argument(
+        "--drop-unreliable",
+        action="store_true",
+        help="keep only the ACs whose A is flagged reliable (calibrated affine_confidence; "
+        "docs/shape_network.md, 'Confidence')",
     )
     p.add_argument(
         "--views",
@@ -257,7 +264,15 @@ def _match_pairs(args) -> int:
             summary.append({**entry, "status": "failed", "error": str(e)})
             continue
         name = _pair_file_name(a, b, n, taken)
-        save_npz(out / name, corrs=res.corrs, certainty=res.certainty, image_a=a, image_b=b)
+        save_npz(
+            out / name,
+            corrs=res.corrs,
+            certainty=res.certainty,
+            affine_confidence=res.affine_confidence,
+            reliable=res.reliable,
+            image_a=a,
+            image_b=b,
+        )
         # Few or no matches is an outcome of matching, not a failure.
         summary.append({**entry, "status": "ok", "file": name, "num_acs": len(res.corrs)})
     summary.sort(key=lambda e: e["line"])
@@ -295,6 +310,8 @@ def cmd_match(args) -> int:
         out,
         corrs=res.corrs,
         certainty=res.certainty,
+        affine_confidence=res.affine_confidence,
+        reliable=res.reliable,
         image_a=args.image_a,
         image_b=args.image_b,
     )
