@@ -1,12 +1,14 @@
 """The view cascade on rotated and zoomed copies of the evaluation's planar pairs.
 
     .venv/bin/python -m affcorr_bench.views [--images 1] [--max-keypoints 1024] [--threads 2]
+        [--families rotation,zoom] [--relative-budget default|none|K]
 
 Pairs: experiment 1's (affcorr_bench.eval.data.hpatches_pairs: graffiti 1->3 plus viewpoint and
 illumination sequences of held-out images, exact H), each with image B rotated about its centre
 by 0, 30, 90, 135 and 180 deg (the canvas grown to hold it), and the graffiti pair and every
-viewpoint pair's reference with image A a 2x, 4x and 6x zoom into its centre. H follows each
-warp exactly.
+viewpoint pair's reference with image A a 2x, 4x and 6x zoom into its centre, into a point
+drawn at random in the middle half of the image (seeded per pair), and with image B zoomed
+into such a point instead. H follows each warp exactly.
 
 Each pair runs through affcorr.Pipeline twice, with views="off" and views="auto" (everything
 else the defaults but max_keypoints and threads), then affcorr's 2-AC homography RANSAC at the
@@ -31,6 +33,7 @@ from . import common
 
 ROTATIONS = (0, 30, 90, 135, 180)
 ZOOMS = (2, 4, 6)
+FAMILIES = ("rotation", "zoom")
 SUCCESS_PX = 10.0
 
 
@@ -49,15 +52,23 @@ def rotated(img: np.ndarray, H: np.ndarray, deg: float) -> tuple[np.ndarray, np.
     return out, R3 @ H
 
 
-def zoomed(img: np.ndarray, H: np.ndarray, z: float) -> tuple[np.ndarray, np.ndarray]:
-    """The centre 1/z of ``img`` enlarged z times (same size), and H @ Z^-1."""
+def zoom_map(img: np.ndarray, z: float, centre=(0.5, 0.5)) -> np.ndarray:
+    """The map Z that enlarges the part 1/z of ``img`` around ``centre`` (fractions of its
+    size) z times, keeping the image's size."""
+    h, w = img.shape
+    cx, cy = centre[0] * (w - 1), centre[1] * (h - 1)
+    # Centred on (cx, cy), clamped so that the enlarged part stays inside the image.
+    cx = min(max(cx, (w - 1) / (2 * z)), (w - 1) * (1 - 1 / (2 * z)))
+    cy = min(max(cy, (h - 1) / (2 * z)), (h - 1) * (1 - 1 / (2 * z)))
+    ox, oy = (w - 1) / 2, (h - 1) / 2
+    return np.array([[z, 0, ox - z * cx], [0, z, oy - z * cy], [0, 0, 1.0]])
+
+
+def zoomed(img: np.ndarray, Z: np.ndarray) -> np.ndarray:
     import cv2
 
     h, w = img.shape
-    cx, cy = (w - 1) / 2, (h - 1) / 2
-    Z = np.array([[z, 0, cx - z * cx], [0, z, cy - z * cy], [0, 0, 1.0]])
-    out = cv2.warpAffine(img, Z[:2], (w, h), flags=cv2.INTER_CUBIC)
-    return out, H @ np.linalg.inv(Z)
+    return cv2.warpAffine(img, Z[:2], (w, h), flags=cv2.INTER_CUBIC)
 
 
 def overlap_error(H: np.ndarray, gt: np.ndarray, img1: np.ndarray, img2: np.ndarray) -> float:
@@ -77,21 +88,31 @@ def overlap_error(H: np.ndarray, gt: np.ndarray, img1: np.ndarray, img2: np.ndar
     return float(np.mean(d)) if np.all(np.isfinite(d)) else float("inf")
 
 
-def cases(images: int | None):
+def cases(images: int | None, families=FAMILIES):
     """(family, transformation, pair id, img1, img2, H) for every case."""
     from .eval import data
 
     pairs = data.hpatches_pairs(images=images)
-    for p in pairs:
-        for r in ROTATIONS:
-            b, H = rotated(p.img2, p.H, r)
-            yield "rotation", f"B rotated {r}°", p.id, p.img1, b, H
-    for p in pairs:
+    if "rotation" in families:
+        for p in pairs:
+            for r in ROTATIONS:
+                b, H = rotated(p.img2, p.H, r)
+                yield "rotation", f"B rotated {r}°", p.id, p.img1, b, H
+    if "zoom" not in families:
+        return
+    for i, p in enumerate(pairs):
         if p.kind == "illumination" or (p.kind == "viewpoint" and p.meta.get("k", 1) != 1):
             continue
+        rng = np.random.default_rng(i)
         for z in ZOOMS:
-            a, H = zoomed(p.img1, p.H, z)
-            yield "zoom", f"A zoomed {z}x", p.id, a, p.img2, H
+            Z = zoom_map(p.img1, z)
+            yield "zoom", f"A zoomed {z}x", p.id, zoomed(p.img1, Z), p.img2, p.H @ np.linalg.inv(Z)
+            Z = zoom_map(p.img1, z, rng.uniform(0.25, 0.75, 2))
+            a = zoomed(p.img1, Z)
+            yield "zoom", f"A zoomed {z}x off-centre", p.id, a, p.img2, p.H @ np.linalg.inv(Z)
+            Z = zoom_map(p.img2, z, rng.uniform(0.25, 0.75, 2))
+            b = zoomed(p.img2, Z)
+            yield "zoom", f"B zoomed {z}x off-centre", p.id, p.img1, b, Z @ p.H
 
 
 def main(argv=None) -> None:
@@ -101,6 +122,12 @@ def main(argv=None) -> None:
     p.add_argument("--images", type=int, default=1, help="held-out images per sequence kind")
     p.add_argument("--max-keypoints", type=int, default=1024)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument("--families", default=",".join(FAMILIES), help="comma-separated")
+    p.add_argument(
+        "--relative-budget",
+        default="default",
+        help="the cascade's view_relative_budget: 'default', 'none' or a number",
+    )
     p.add_argument("--out", default=str(common.RESULTS / "views"))
     args = p.parse_args(argv)
 
@@ -108,12 +135,23 @@ def main(argv=None) -> None:
     from affcorr._progress import progress
     from affcorr.pipeline import PIPELINE_DEFAULTS
 
+    budget = {"default": PIPELINE_DEFAULTS["view_relative_budget"], "none": None}.get(
+        args.relative_budget.lower(), None
+    )
+    if args.relative_budget.lower() not in ("default", "none"):
+        budget = float(args.relative_budget)
     pipes = {
-        mode: affcorr.Pipeline(max_keypoints=args.max_keypoints, threads=args.threads, views=mode)
+        mode: affcorr.Pipeline(
+            max_keypoints=args.max_keypoints,
+            threads=args.threads,
+            views=mode,
+            view_relative_budget=budget,
+        )
         for mode in ("off", "auto")
     }
     thr = PIPELINE_DEFAULTS["homography_threshold"]
-    all_cases = list(cases(args.images))
+    families = tuple(f.strip() for f in args.families.split(",") if f.strip())
+    all_cases = list(cases(args.images, families))
     rows = []
     t0 = time.time()
     for family, what, pid, a, b, H in progress(all_cases, "views", "pair"):
@@ -136,6 +174,11 @@ def main(argv=None) -> None:
                     seconds=seconds,
                     view=view["label"] if view else "",
                     views_tried=len(res.views),
+                    # The cascade's cost in plain passes: its time over the plain pass's.
+                    cost=(
+                        res.timings["total"]
+                        / max(res.timings["total"] - res.timings["views"], 1e-9)
+                    ),
                 )
             )
     out = Path(args.out)
@@ -153,6 +196,8 @@ def main(argv=None) -> None:
                 float(np.median([r["seconds"] for r in sel["off"]])),
                 float(np.median([r["seconds"] for r in sel["auto"]])),
                 float(np.max([r["seconds"] for r in sel["auto"]])),
+                max((r["views_tried"] for r in sel["auto"]), default=0),
+                max((r["cost"] for r in sel["auto"] if r["solved"]), default=float("nan")),
                 ", ".join(f"{k} ×{v}" for k, v in used.most_common(3)) or "–",
             ]
         )
@@ -165,13 +210,18 @@ def main(argv=None) -> None:
         f"Date: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}. affcorr "
         f"{affcorr.__version__}; matcher {PIPELINE_DEFAULTS['matcher']} at "
         f"{args.max_keypoints} keypoints, {args.threads} threads; homography threshold {thr} "
-        f"px. {len(all_cases)} cases in {time.time() - t0:.0f} s; load average at the end "
+        f"px; view_relative_budget {budget}. {len(all_cases)} cases in "
+        f"{time.time() - t0:.0f} s; load average at the end "
         f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} on 2 cores.",
         "",
         "Pairs: experiment 1's planar pairs (graffiti 1->3 and held-out viewpoint / "
         "illumination sequences, exact H) with B rotated, and the reference pairs (graffiti, "
-        "each viewpoint sequence's first target) with A zoomed into its centre. Solved: H "
-        f"within {SUCCESS_PX:.0f} px of the truth on average over A's pixels seen in B.",
+        "each viewpoint sequence's first target) with A zoomed into its centre or into a "
+        "random point of its middle half, or B zoomed so. Solved: H "
+        f"within {SUCCESS_PX:.0f} px of the truth on average over A's pixels seen in B. "
+        "*views tried*: the most views (the plain pair included) of a pair; *cost*: the most "
+        "time a solved pair's cascade took, in plain passes (total time / time without the "
+        "cascade's views).",
         "",
     ]
     lines += common.md_table(
@@ -182,6 +232,8 @@ def main(argv=None) -> None:
             "median s/pair, off",
             "median s/pair, auto",
             "max s/pair, auto",
+            "max views tried",
+            "max cost of a solved pair (× plain)",
             "views that solved",
         ],
         table,

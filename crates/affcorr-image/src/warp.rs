@@ -63,6 +63,18 @@ impl AffineWarp {
         (Self { m: self.m, c }, size(0), size(1))
     }
 
+    /// The crop `window` = `[x0, y0, x1, y1]` (fractions of the view's width and height) of
+    /// the view `self` of `width` × `height` pixels: the same map shifted so that the
+    /// window's corner is the origin, and the window's size. Matching a magnified window of an
+    /// image spends the matcher's keypoint budget on that part only.
+    pub fn windowed(self, width: usize, height: usize, window: [f64; 4]) -> (Self, usize, usize) {
+        let [x0, y0, x1, y1] = window.map(|v| v.clamp(0.0, 1.0));
+        let (w, h) = (width as f64, height as f64);
+        let c = [self.c[0] - (x0 * w).floor(), self.c[1] - (y0 * h).floor()];
+        let size = |lo: f64, hi: f64, n: f64| (((hi - lo) * n).round() as usize).max(1);
+        (Self { m: self.m, c }, size(x0, x1, w), size(y0, y1, h))
+    }
+
     fn linear_apply(&self, p: [f64; 2]) -> [f64; 2] {
         let m = &self.m;
         [m[0] * p[0] + m[1] * p[1], m[2] * p[0] + m[3] * p[1]]
@@ -191,6 +203,27 @@ mod tests {
         assert!((w.min_singular_value() - 0.5).abs() < 1e-12);
         let det = w.m[0] * w.m[3] - w.m[1] * w.m[2];
         assert!((det - 1.5 * 1.5 / 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_window_crops_the_view() {
+        // A 2× zoom of a 100 × 50 image is 199 × 99 px; its lower-right quarter starts at
+        // (49, 24) in view pixels (floored), i.e. at (24.5, 12) in the image.
+        let (w, vw, vh) = AffineWarp::linear(0.0, 2.0, 1.0, 0.0).fitted(100, 50);
+        let (t, tw, th) = w.windowed(vw, vh, [0.25, 0.25, 0.75, 0.75]);
+        assert_eq!((tw, th), (100, 50));
+        assert!(close(&t.apply([24.5, 12.0]), &[0.0, 0.0], 1e-12));
+        assert_eq!(t.m, w.m);
+        // The view of the window is the window of the view.
+        let img = GrayImage::new(100, 50, (0..5000).map(|v| (v % 97) as f32).collect()).unwrap();
+        let (full, tile) = (
+            warp_image(&img, &w, vw, vh).unwrap(),
+            warp_image(&img, &t, tw, th).unwrap(),
+        );
+        for (y, x) in [(0, 0), (10, 33), (49, 99)] {
+            let v = full.data()[(y + 24) * vw + x + 49];
+            assert_eq!(tile.data()[y * tw + x], v);
+        }
     }
 
     #[test]

@@ -36,6 +36,11 @@ pub const VIEW_MIN_INLIERS: usize = 12;
 /// ... making up at least this share of the matches.
 pub const VIEW_MIN_INLIER_RATIO: f64 = 0.1;
 
+/// The view cascade starts no new view after this many times the plain pass: what a pair
+/// that no view solves costs at most (about ASIFT's cost over SIFT). Every pair a view solved
+/// in benches/results/views.md and benches/results/eval/extreme.md needed less.
+pub const VIEW_RELATIVE_BUDGET: Option<f64> = Some(30.0);
+
 /// The seed of a dense matcher's balanced sampling and of the robust estimators.
 pub const SEED: u64 = 0;
 

@@ -25,7 +25,7 @@ use crate::features::Features;
 use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
 use crate::views::{
-    ViewImage, ViewMode, ViewOptions, ViewReport, ViewSpec, candidate_views, guided_view, verify,
+    ViewMode, ViewOptions, ViewReport, ViewSpec, candidate_views, guided_view, verify,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -447,7 +447,9 @@ impl Pipeline {
             (plain, Vec::new())
         } else {
             let t = Instant::now();
-            let r = self.view_cascade(plain, work_a, work_b, &mut timings)?;
+            // The plain pass: extraction of both images (cached or not) and their matching.
+            let plain_cost = start.elapsed() + fa.extraction_time() + fb.extraction_time();
+            let r = self.view_cascade(plain, plain_cost, work_a, work_b, &mut timings)?;
             timings.views += t.elapsed();
             r
         };
@@ -547,6 +549,7 @@ impl Pipeline {
     fn view_cascade(
         &self,
         plain: WorkMatches,
+        plain_cost: Duration,
         work_a: &GrayImage,
         work_b: &GrayImage,
         timings: &mut Timings,
@@ -589,22 +592,15 @@ impl Pipeline {
         let (mut guide_inliers, mut guided) = (inlier_acs.len(), 0);
         let mut tried = 0;
         while let Some(view) = queue.pop_front() {
-            if tried >= o.max_views || o.time_budget.is_some_and(|b| start.elapsed() >= b) {
+            if tried >= o.max_views || !o.within_budget(start.elapsed(), plain_cost) {
                 break;
             }
             tried += 1;
             let t = Instant::now();
-            let (a_warp, b_warp) = match view.image {
-                ViewImage::A => (
-                    Some(view.linear().fitted(work_a.width(), work_a.height())),
-                    None,
-                ),
-                ViewImage::B => (
-                    None,
-                    Some(view.linear().fitted(work_b.width(), work_b.height())),
-                ),
-                ViewImage::None => (None, None),
-            };
+            let [a_warp, b_warp] = view.warps(
+                (work_a.width(), work_a.height()),
+                (work_b.width(), work_b.height()),
+            );
             let warped = |img: &GrayImage, w: &Option<(AffineWarp, usize, usize)>| {
                 w.map(|(warp, vw, vh)| warp_image(img, &warp, vw, vh))
                     .transpose()

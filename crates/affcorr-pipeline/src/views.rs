@@ -101,6 +101,10 @@ pub struct ViewOptions {
     pub mode: ViewMode,
     /// Stop starting views after this much time in the cascade (`None`: no limit).
     pub time_budget: Option<Duration>,
+    /// Stop starting views once the cascade has taken this many times the plain pass
+    /// (`None`: no limit). Unlike [`Self::time_budget`] it scales with the machine, the image
+    /// size and the keypoint budget, and bounds what a pair that no view solves costs.
+    pub relative_budget: Option<f64>,
     /// At most this many synthetic views.
     pub max_views: usize,
     /// Verification: at least this many F-inliers (point and affine residual).
@@ -114,6 +118,7 @@ impl Default for ViewOptions {
         Self {
             mode: defaults::VIEWS,
             time_budget: None,
+            relative_budget: defaults::VIEW_RELATIVE_BUDGET,
             max_views: 64,
             min_inliers: defaults::VIEW_MIN_INLIERS,
             min_inlier_ratio: defaults::VIEW_MIN_INLIER_RATIO,
@@ -122,7 +127,24 @@ impl Default for ViewOptions {
 }
 
 impl ViewOptions {
+    /// Whether the cascade, `elapsed` into its views after a plain pass of `plain`, may start
+    /// another view.
+    pub(crate) fn within_budget(&self, elapsed: Duration, plain: Duration) -> bool {
+        self.time_budget.is_none_or(|b| elapsed < b)
+            && self
+                .relative_budget
+                .is_none_or(|k| elapsed.as_secs_f64() < k * plain.as_secs_f64())
+    }
+
     pub(crate) fn validate(&self) -> Result<()> {
+        if let Some(k) = self.relative_budget
+            && !(k > 0.0 && k.is_finite())
+        {
+            return Err(PipelineError::invalid(
+                "relative_budget",
+                format!("must be a positive number, got {k}"),
+            ));
+        }
         if !(0.0..=1.0).contains(&self.min_inlier_ratio) {
             return Err(PipelineError::invalid(
                 "min_inlier_ratio",
@@ -168,6 +190,14 @@ pub struct ViewSpec {
     pub tilt_angle: f64,
     /// The linear part, when the view was guided by ACs rather than parametrised.
     pub guided: Option<[f64; 4]>,
+    /// The part of the warped image that is matched, `[x0, y0, x1, y1]` as fractions of its
+    /// width and height (`None`: all of it). A magnified tile spends the keypoint budget on
+    /// a small part of the image: where the other image is a strong zoom into it.
+    pub window: Option<[f64; 4]>,
+    /// The zoom of the *other* image (1: as it is). A tile magnified by s meets the other
+    /// image shrunk, so that the scales meet without magnifying the tile past the matcher's
+    /// useful resolution.
+    pub other_scale: f64,
 }
 
 impl ViewSpec {
@@ -179,6 +209,8 @@ impl ViewSpec {
         tilt: 1.0,
         tilt_angle: 0.0,
         guided: None,
+        window: None,
+        other_scale: 1.0,
     };
 
     fn param(image: ViewImage, rotation_deg: f64, scale: f64, tilt: f64, tilt_deg: f64) -> Self {
@@ -188,7 +220,44 @@ impl ViewSpec {
             scale,
             tilt,
             tilt_angle: tilt_deg.to_radians(),
-            guided: None,
+            ..Self::PLAIN
+        }
+    }
+
+    /// A tile of `image` magnified by `scale`: the window `[x0, y0, x0 + size, y0 + size]`
+    /// (fractions), with the other image zoomed by `other_scale`.
+    fn tile(image: ViewImage, scale: f64, x0: f64, y0: f64, size: f64, other_scale: f64) -> Self {
+        Self {
+            image,
+            scale,
+            window: Some([x0, y0, x0 + size, y0 + size]),
+            other_scale,
+            ..Self::PLAIN
+        }
+    }
+
+    /// The warps of images A and B (`width` × `height` each) that make this view, each with
+    /// the size of its view, `None` for an image matched as it is.
+    pub fn warps(
+        &self,
+        a: (usize, usize),
+        b: (usize, usize),
+    ) -> [Option<(AffineWarp, usize, usize)>; 2] {
+        let (main, other) = match self.image {
+            ViewImage::None => return [None, None],
+            ViewImage::A => (a, b),
+            ViewImage::B => (b, a),
+        };
+        let (w, vw, vh) = self.linear().fitted(main.0, main.1);
+        let main_view = Some(match self.window {
+            Some(window) => w.windowed(vw, vh, window),
+            None => (w, vw, vh),
+        });
+        let other_view = (self.other_scale != 1.0)
+            .then(|| AffineWarp::linear(0.0, self.other_scale, 1.0, 0.0).fitted(other.0, other.1));
+        match self.image {
+            ViewImage::A => [main_view, other_view],
+            _ => [other_view, main_view],
         }
     }
 
@@ -224,6 +293,13 @@ impl ViewSpec {
                 self.tilt_angle.to_degrees()
             ));
         }
+        if let Some([x0, y0, x1, y1]) = self.window {
+            parts.push(format!("tile [{x0}, {y0}; {x1}, {y1}]"));
+        }
+        if self.other_scale != 1.0 {
+            let other = if self.image == ViewImage::A { "B" } else { "A" };
+            parts.push(format!("+ {other} zoom {}", self.other_scale));
+        }
         parts.join(" ")
     }
 }
@@ -252,6 +328,17 @@ pub fn candidate_views() -> Vec<ViewSpec> {
     v.extend([zoom(A, 0.5), zoom(B, 0.5)]);
     v.extend([45.0, 315.0, 135.0, 225.0].map(rotation));
     v.extend([zoom(A, 0.25), zoom(B, 0.25)]);
+    // Strong zooms (4–8×): the zoomed image's content is a small part of the other, where
+    // the other's keypoint budget barely lands. Half-size tiles of that image, magnified by 2
+    // and overlapping by half (so that any part up to a quarter of the image's side lies
+    // inside one), meet the zoomed image shrunk by ½.
+    for image in [B, A] {
+        for y0 in [0.25, 0.0, 0.5] {
+            for x0 in [0.25, 0.0, 0.5] {
+                v.push(ViewSpec::tile(image, 2.0, x0, y0, 0.5, 0.5));
+            }
+        }
+    }
     for (t, n) in [(2.0, 4), (4.0, 8)] {
         for image in [A, B] {
             for k in 0..n {
@@ -363,11 +450,12 @@ mod tests {
     #[test]
     fn candidates_cover_rotation_zoom_and_tilt_without_repeats() {
         let v = candidate_views();
-        assert_eq!(v.len(), 7 + 4 + 8 + 16 + 24);
+        assert_eq!(v.len(), 7 + 4 + 18 + 8 + 16 + 24);
         let labels: std::collections::BTreeSet<String> = v.iter().map(|s| s.label()).collect();
         assert_eq!(labels.len(), v.len());
         assert!(labels.contains("B rot 90°") && labels.contains("A zoom 0.25"));
         assert!(labels.contains("B tilt 4 @157.5°") && labels.contains("A rot 90° tilt 4 @22.5°"));
+        assert!(labels.contains("B zoom 2 tile [0.5, 0.25; 1, 0.75] + A zoom 0.5"));
     }
 
     #[test]

@@ -149,3 +149,18 @@ fn an_easy_pair_runs_no_synthetic_view() {
     assert_eq!(off.corrs, m.corrs);
     assert!(off.views.is_empty() && off.timings.views.is_zero());
 }
+
+#[test]
+fn a_6x_zoom_off_centre_is_solved_through_a_magnified_tile() {
+    let (a, b, h) = graffiti();
+    // A′ = the 133 × 107 part of A around (560, 220) (off the centre), enlarged 6×:
+    // x′ = 6 (x − origin). In B that part is a small patch, where few keypoints land.
+    let origin = [560.0 - 800.0 / 12.0, 220.0 - 640.0 / 12.0];
+    let zoom = AffineWarp {
+        m: [6.0, 0.0, 0.0, 6.0],
+        c: [-6.0 * origin[0], -6.0 * origin[1]],
+    };
+    let a_zoom = warp_image(&a, &zoom, 800, 640).unwrap();
+    let gt = h * warp_matrix(&zoom).try_inverse().unwrap();
+    check(&a_zoom, &b, &gt, "A zoomed 6x off-centre");
+}
