@@ -13,6 +13,7 @@
 //! - Matching and estimation run with the GIL released.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use crate::arrays::{flatten, opt_int_option, to_numpy, to_usize};
@@ -24,8 +25,8 @@ use crate::ransac::{mat_result, nan_mat3, nan_pose, outcome, parse_options, pose
 use affcorr::pipeline::defaults::{self, Geometry};
 use affcorr::pipeline::views::ViewImage;
 use affcorr::pipeline::{
-    AffineRefineOptions, GrayImage, ImageSource, Matcher, Matches, Pipeline, PipelineError,
-    RgbImage, ViewOptions, init_ort as init, model_file,
+    AffineRefineOptions, Features, GrayImage, ImageSource, Matcher, Matches, Pipeline,
+    PipelineError, RgbImage, ViewOptions, init_ort as init, model_file,
 };
 use affcorr::ransac::{
     Correspondences, Estimate, EstimatorOptions, RansacError, estimate_fundamental,
@@ -35,10 +36,11 @@ use affcorr::runner::contract::MAX_THREADS;
 use numpy::{PyArrayDyn, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyEllipsis, PyList, PySlice, PyTuple};
+use pyo3::types::{PyBytes, PyDict, PyEllipsis, PyList, PySlice, PyTuple};
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PipelineRunner>()?;
+    m.add_class::<PipelineFeatures>()?;
     let py = m.py();
     let d = PyDict::new(py);
     d.set_item("matcher", defaults::MATCHER.name())?;
@@ -423,8 +425,21 @@ impl PipelineRunner {
             })?
             .collect::<PyResult<_>>()?;
         let colour = self.inner.matcher() == Matcher::Dense;
-        let mut args: Vec<PyResult<(ImageArg, ImageArg, Duration)>> =
-            Vec::with_capacity(items.len());
+        // Each distinct image object is converted once, so that the pipeline extracts its
+        // features once (`Pipeline::match_pairs` shares them by path or buffer).
+        let mut images: Vec<ImageArg> = Vec::new();
+        // `items` keeps every object alive, so an address names one object throughout.
+        let mut seen: std::collections::HashMap<usize, usize> = std::collections::HashMap::new();
+        let mut convert = |obj: &Bound<'py, PyAny>, name: &str| -> PyResult<(usize, Duration)> {
+            if let Some(&k) = seen.get(&(obj.as_ptr() as usize)) {
+                return Ok((k, Duration::ZERO));
+            }
+            let (arg, t) = image_arg(py, obj, name, colour)?;
+            images.push(arg);
+            seen.insert(obj.as_ptr() as usize, images.len() - 1);
+            Ok((images.len() - 1, t))
+        };
+        let mut args: Vec<PyResult<(usize, usize, Duration)>> = Vec::with_capacity(items.len());
         for (i, item) in items.iter().enumerate() {
             let pair = item
                 .cast::<PyTuple>()
@@ -440,9 +455,8 @@ impl PipelineRunner {
                     "pairs[{i}] must be a pair (image_a, image_b)"
                 )));
             };
-            let arg = image_arg(py, &a, "image_a", colour).and_then(|(a, ta)| {
-                image_arg(py, &b, "image_b", colour).map(|(b, tb)| (a, b, ta + tb))
-            });
+            let arg = convert(&a, "image_a")
+                .and_then(|(a, ta)| convert(&b, "image_b").map(|(b, tb)| (a, b, ta + tb)));
             match arg {
                 // A KeyboardInterrupt (in an argument's __array__, say) stops the batch.
                 Err(e) if crate::errors::passes_through(py, &e) => return Err(e),
@@ -452,7 +466,11 @@ impl PipelineRunner {
         let runnable: Vec<(usize, ImageSource<'_>, ImageSource<'_>)> = args
             .iter()
             .enumerate()
-            .filter_map(|(i, a)| a.as_ref().ok().map(|(a, b, _)| (i, a.source(), b.source())))
+            .filter_map(|(i, a)| {
+                a.as_ref()
+                    .ok()
+                    .map(|&(a, b, _)| (i, images[a].source(), images[b].source()))
+            })
             .collect();
         let results = interruptible(py, |cancel| {
             self.inner
@@ -479,6 +497,31 @@ impl PipelineRunner {
             out.push(item);
         }
         PyList::new(py, out)
+    }
+
+    /// The features of one image (`Pipeline::extract`): a `PipelineFeatures`.
+    fn extract(&self, py: Python<'_>, image: &Bound<'_, PyAny>) -> PyResult<PipelineFeatures> {
+        let colour = self.inner.matcher() == Matcher::Dense;
+        let (img, t) = image_arg(py, image, "image", colour)?;
+        let mut f = interruptible(py, |_| self.inner.extract(img.source()))?
+            .map_err(|e| pipeline_error(e, None))?;
+        f.add_decode_time(t);
+        Ok(PipelineFeatures { inner: Arc::new(f) })
+    }
+
+    /// The match tuple of two images' features (`Pipeline::match_features`): `match_pair`'s
+    /// result for the two images.
+    fn match_features<'py>(
+        &self,
+        py: Python<'py>,
+        features_a: &Bound<'py, PyAny>,
+        features_b: &Bound<'py, PyAny>,
+    ) -> PyResult<MatchTuple<'py>> {
+        let fa = features_arg(features_a, "features_a")?;
+        let fb = features_arg(features_b, "features_b")?;
+        let m = interruptible(py, |_| self.inner.match_features(&fa, &fb))?
+            .map_err(|e| pipeline_error(e, None))?;
+        match_tuple(py, m, Duration::ZERO)
     }
 
     /// `"xfeat"`, `"xfeat-star"`, `"xfeat-lighterglue"` or `"dense"`.
@@ -607,4 +650,108 @@ fn prefix_error(py: Python<'_>, i: usize, e: PyErr) -> PyErr {
     let msg = format!("pairs[{i}]: {}", e.value(py));
     let ty = e.get_type(py);
     PyErr::from_type(ty, msg)
+}
+
+/// `features_a` / `features_b`: a `PipelineFeatures` (of `PipelineRunner.extract`).
+fn features_arg(obj: &Bound<'_, PyAny>, name: &str) -> PyResult<Arc<Features>> {
+    obj.cast::<PipelineFeatures>()
+        .map(|f| f.get().inner.clone())
+        .map_err(|_| {
+            PyValueError::new_err(format!(
+                "{name} must be the Features of Pipeline.extract, got {}",
+                obj.get_type()
+                    .name()
+                    .map_or_else(|_| "?".to_string(), |n| n.to_string())
+            ))
+        })
+}
+
+/// One image's features (`affcorr_pipeline::Features`), immutable; pickled as its bytes.
+#[pyclass(name = "PipelineFeatures", module = "affcorr._native", frozen)]
+pub struct PipelineFeatures {
+    inner: Arc<Features>,
+}
+
+#[pymethods]
+impl PipelineFeatures {
+    /// The matcher that extracted them.
+    #[getter]
+    fn matcher(&self) -> &'static str {
+        self.inner.matcher().name()
+    }
+
+    /// (W, H) of the original image.
+    #[getter]
+    fn image_size(&self) -> (usize, usize) {
+        self.inner.image_size()
+    }
+
+    /// (W, H) at the working resolution.
+    #[getter]
+    fn working_size(&self) -> (usize, usize) {
+        self.inner.working_size()
+    }
+
+    /// (N, 2) float64 keypoints in the original pixels (empty for a dense matcher).
+    #[getter]
+    fn keypoints<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let k = self.inner.keypoints();
+        Ok(to_numpy(py, &[k.len(), 2], flatten(k))?.into_any())
+    }
+
+    /// (N,) float32 detector scores (sparse matchers; empty otherwise).
+    #[getter]
+    fn scores<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let s = self.inner.scores().to_vec();
+        Ok(crate::image::f32_array(py, &[s.len()], s)?.into_any())
+    }
+
+    /// (N, D) float32 descriptors (empty for a dense matcher).
+    #[getter]
+    fn descriptors<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
+        let d = self.inner.descriptor_dim();
+        let v = self.inner.descriptors().to_vec();
+        let n = if d == 0 { 0 } else { v.len() / d };
+        Ok(crate::image::f32_array(py, &[n, d], v)?.into_any())
+    }
+
+    /// Seconds spent decoding and extracting (0 after `from_bytes`).
+    #[getter]
+    fn seconds(&self) -> f64 {
+        self.inner.extraction_time().as_secs_f64()
+    }
+
+    /// The features as bytes (`from_bytes` reads them back).
+    fn to_bytes<'py>(&self, py: Python<'py>) -> Bound<'py, PyBytes> {
+        PyBytes::new(py, &self.inner.to_bytes())
+    }
+
+    /// Features from `to_bytes`; anything else raises ValueError naming `data`.
+    #[staticmethod]
+    fn from_bytes(data: &[u8]) -> PyResult<Self> {
+        Features::from_bytes(data)
+            .map(|f| Self { inner: Arc::new(f) })
+            .map_err(|e| pipeline_error(e, None))
+    }
+
+    fn __reduce__<'py>(
+        slf: &Bound<'py, Self>,
+    ) -> PyResult<(Bound<'py, PyAny>, (Bound<'py, PyBytes>,))> {
+        let py = slf.py();
+        let ctor = slf.get_type().getattr("from_bytes")?;
+        Ok((ctor, (slf.get().to_bytes(py),)))
+    }
+
+    fn __len__(&self) -> usize {
+        self.inner.len()
+    }
+
+    fn __repr__(&self) -> String {
+        let (w, h) = self.inner.image_size();
+        format!(
+            "Features({}, {} keypoints, image {w}x{h})",
+            self.inner.matcher(),
+            self.inner.len()
+        )
+    }
 }

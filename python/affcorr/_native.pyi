@@ -338,6 +338,32 @@ PIPELINE_MATCHER_MODELS: dict[str, list[str]]
 PIPELINE_MODEL_FILES: dict[str, str]
 
 @final
+class PipelineFeatures:
+    """One image's features (PipelineRunner.extract); immutable, picklable (as its bytes)."""
+
+    @property
+    def matcher(self) -> str: ...
+    @property
+    def image_size(self) -> tuple[int, int]: ...
+    @property
+    def working_size(self) -> tuple[int, int]: ...
+    @property
+    def keypoints(self) -> NDArray[np.float64]:
+        """(N, 2) in the original pixels (empty for a dense matcher)."""
+    @property
+    def scores(self) -> NDArray[np.float32]: ...
+    @property
+    def descriptors(self) -> NDArray[np.float32]:
+        """(N, D)."""
+    @property
+    def seconds(self) -> float: ...
+    def to_bytes(self) -> bytes: ...
+    @staticmethod
+    def from_bytes(data: bytes) -> PipelineFeatures:
+        """Features from to_bytes; anything else raises ValueError naming data."""
+    def __reduce__(self) -> tuple[Any, tuple[bytes]]: ...
+    def __len__(self) -> int: ...
+
 class PipelineRunner:
     """Matcher (XFeat backbone + MNN / XFeat* refinement / LighterGlue, or a dense-warp-v1
     model with DKM's balanced sampling) and shape network in Rust (use ``affcorr.Pipeline``).
@@ -386,7 +412,13 @@ class PipelineRunner:
         (keypoints in A, keypoints in B), views [report per view]); GIL released."""
     def match_pairs(self, pairs: Sequence[tuple[Any, Any]]) -> list[_MatchTuple | Exception]:
         """match_pair over the pairs, in parallel on single-threaded copies of the models when
-        threads > 1; a failing pair is its exception ("pairs[i]: ...") in its place."""
+        threads > 1; a failing pair is its exception ("pairs[i]: ...") in its place. An image
+        in several pairs (the same path or object) has its features extracted once."""
+    def extract(self, image: Any) -> PipelineFeatures:
+        """One image's features (decoded, max_side, keypoints and descriptors); GIL released."""
+    def match_features(self, features_a: Any, features_b: Any) -> _MatchTuple:
+        """The match tuple of two images' features (bit-identical to match_pair's); features of
+        another matcher or options raise ValueError naming the argument; GIL released."""
     @property
     def matcher(self) -> str: ...
     @property

@@ -63,6 +63,7 @@ from .shape import _PerProcess, bundled_shape_model, find_ort_library
 __all__ = [
     "DEFAULT_DENSE_MATCHES",
     "MATCHERS",
+    "Features",
     "PIPELINE_DEFAULTS",
     "MatchResult",
     "Pipeline",
@@ -89,6 +90,13 @@ _FILES: dict[str, str] = dict(_native.PIPELINE_MODEL_FILES)
 _NEEDS: dict[str, list[str]] = {k: list(v) for k, v in _native.PIPELINE_MATCHER_MODELS.items()}
 
 _D = PIPELINE_DEFAULTS
+
+
+#: One image's features (:meth:`Pipeline.extract`), immutable: ``matcher``, ``image_size``
+#: (W, H), ``working_size``, ``keypoints`` (N, 2) in the original pixels, ``scores`` (N,),
+#: ``descriptors`` (N, D), ``seconds`` (extraction time), ``len()``; ``to_bytes()`` and
+#: ``Features.from_bytes(data)`` store them (a versioned binary format), and they pickle.
+Features = _native.PipelineFeatures
 
 
 def bundled_models_dir() -> Path:
@@ -374,11 +382,35 @@ class Pipeline:
         starts no further pair and raises ``KeyboardInterrupt`` once the running ones end."""
         _check_on_error(on_error)
         items = []
+        # One conversion per distinct image object, so that Rust sees one buffer per image and
+        # extracts its features once (paths are shared by name there).
+        converted: dict[int, Any] = {}
+
+        def image(x: Any) -> Any:
+            if id(x) not in converted:
+                converted[id(x)] = self._image(x)
+            return converted[id(x)]
+
         for i, p in enumerate(pairs):
             if isinstance(p, (str, bytes, os.PathLike, np.ndarray)) or len(p) != 2:
                 raise ValueError(f"pairs[{i}] must be a pair (image_a, image_b)")
-            items.append((self._image(p[0]), self._image(p[1])))
+            items.append((image(p[0]), image(p[1])))
         return _per_pair(self._runner.match_pairs(items), lambda r: MatchResult(*r), on_error)
+
+    def extract(self, image: ImageLike) -> Features:
+        """The features of one image, to match with many others (:meth:`match_features`): it is
+        decoded, downscaled to ``max_side``, and the matcher's keypoints and descriptors are
+        computed (a dense matcher, which runs on the pair, keeps the colour image). In Rust with
+        the GIL released. :class:`Features` pickle (as :meth:`Features.to_bytes`), so they can
+        be cached on disk or sent to other processes."""
+        return self._runner.extract(self._image(image))
+
+    def match_features(self, features_a: Features, features_b: Features) -> MatchResult:
+        """The ACs of two images from their :meth:`extract` features: :meth:`match_pair`'s
+        result bit for bit (the view cascade included), without extracting again. The timings
+        count each image's extraction too. Features of another matcher, ``max_keypoints`` or
+        ``max_side`` raise ``ValueError`` naming the argument."""
+        return MatchResult(*self._runner.match_features(features_a, features_b))
 
     # ----------------------------------------------------------------- estimation
 

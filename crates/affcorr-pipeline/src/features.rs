@@ -121,6 +121,12 @@ impl Features {
         self.decode + t.preprocess + t.network + t.detection
     }
 
+    /// Counts `d` more decoding time (for callers that decode or convert the image
+    /// themselves, such as the Python bindings).
+    pub fn add_decode_time(&mut self, d: Duration) {
+        self.decode += d;
+    }
+
     /// The features as bytes ([`Self::from_bytes`] reads them back, equal but for the times).
     pub fn to_bytes(&self) -> Vec<u8> {
         let mut w = Writer(Vec::with_capacity(
