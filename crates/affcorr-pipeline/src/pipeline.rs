@@ -1,5 +1,6 @@
 //! [`Pipeline`]: the stages in order (see the crate docs), one pair or many.
 
+use std::borrow::Cow;
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -17,7 +18,9 @@ use affcorr_ransac::{
     Correspondences, Estimate, EstimatorOptions, SamplerKind, estimate_fundamental,
     estimate_homography, estimate_relative_pose,
 };
-use affcorr_runner::{Backbone, DenseMatcher, Matcher, PointMatcher, PointMatches, ShapeEstimator};
+use affcorr_runner::{
+    Backbone, DenseMatcher, ImageFeatures, Matcher, PointMatcher, PointMatches, ShapeEstimator,
+};
 
 use crate::builder::PipelineBuilder;
 use crate::error::{PipelineError, Result};
@@ -449,7 +452,12 @@ impl Pipeline {
             let t = Instant::now();
             // The plain pass: extraction of both images (cached or not) and their matching.
             let plain_cost = start.elapsed() + fa.extraction_time() + fb.extraction_time();
-            let r = self.view_cascade(plain, plain_cost, work_a, work_b, &mut timings)?;
+            let r = self.view_cascade(
+                plain,
+                plain_cost,
+                [(work_a, &fa.matcher), (work_b, &fb.matcher)],
+                &mut timings,
+            )?;
             timings.views += t.elapsed();
             r
         };
@@ -478,6 +486,19 @@ impl Pipeline {
             matches.retain_reliable();
         }
         Ok(matches)
+    }
+
+    /// The features of a view of an image: extracted when the view warps it, else the plain
+    /// pass's `plain`.
+    fn view_features<'f>(
+        &self,
+        view: &Option<GrayImage>,
+        plain: &'f ImageFeatures,
+    ) -> Result<Cow<'f, ImageFeatures>> {
+        Ok(match view {
+            Some(v) => Cow::Owned(self.matcher.extract(v, None)?),
+            None => Cow::Borrowed(plain),
+        })
     }
 
     /// Patches, shape network and refinement on the matches `raw` of two images (the working
@@ -550,8 +571,7 @@ impl Pipeline {
         &self,
         plain: WorkMatches,
         plain_cost: Duration,
-        work_a: &GrayImage,
-        work_b: &GrayImage,
+        [(work_a, features_a), (work_b, features_b)]: [(&GrayImage, &ImageFeatures); 2],
         timings: &mut Timings,
     ) -> Result<(WorkMatches, Vec<ViewReport>)> {
         let o = &self.views;
@@ -612,8 +632,21 @@ impl Pipeline {
             if small(&va) || small(&vb) {
                 continue;
             }
+            // An image the view leaves as it is keeps the plain pass's features.
+            let (fa, fb) = (
+                self.view_features(&va, features_a)?,
+                self.view_features(&vb, features_b)?,
+            );
+            let mut raw = self.matcher.match_features(&fa, &fb)?;
+            // The reused features' extraction was the plain pass's, timed there.
+            for f in [&fa, &fb] {
+                if let Cow::Borrowed(f) = f {
+                    raw.timings.preprocess -= f.timings.preprocess;
+                    raw.timings.network -= f.timings.network;
+                    raw.timings.detection -= f.timings.detection;
+                }
+            }
             let (va, vb) = (va.as_ref().unwrap_or(work_a), vb.as_ref().unwrap_or(work_b));
-            let raw = self.matcher.match_images(va, vb, None)?;
             let m = self.match_working(va, vb, raw, timings)?;
             let (wa, wb) = (
                 a_warp.map_or(AffineWarp::IDENTITY, |w| w.0),
