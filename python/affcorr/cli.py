@@ -500,6 +500,40 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def cmd_batch(args) -> int:
+    from affcorr import batch
+
+    geometry = [g for g in args.geometry.split(",") if g] if args.geometry else []
+    summary = batch.run(
+        args.pairs,
+        args.images,
+        args.output,
+        matcher=args.matcher,
+        max_keypoints=args.max_keypoints,
+        max_side=args.max_side,
+        views=args.views,
+        refine_affine=args.refine_affine,
+        shape_model=args.shape_model,
+        geometry=geometry,
+        cameras=args.cameras,
+        colmap=args.colmap,
+        workers=args.workers,
+        threads_per_worker=args.threads_per_worker,
+        ray_address=args.ray,
+        chunk_size=args.chunk_size,
+        cache=args.cache,
+        resume=args.resume,
+        overwrite=args.overwrite,
+        retries=args.retries,
+        progress=not args.no_progress,
+    )
+    for a, b, e in summary.failures[:20]:
+        print(f"  failed: {a} {b}: {e}", file=sys.stderr)
+    if len(summary.failures) > 20:
+        print(f"  ... and {len(summary.failures) - 20} more (failures.jsonl)", file=sys.stderr)
+    return 0 if summary.failed == 0 else 3
+
+
 def _add_verbosity(p: argparse.ArgumentParser, top: bool) -> None:
     # On the top parser and on each command, so that `affcorr -v match ...` and
     # `affcorr match ... -v` both work (a command's flags must not reset the top's).
@@ -583,6 +617,69 @@ def build_parser() -> argparse.ArgumentParser:
         f"(default {PIPELINE_DEFAULTS['homography_threshold']})",
     )
     p.set_defaults(run=cmd_show)
+
+    p = sub.add_parser(
+        "batch",
+        help="many pairs -> hloc HDF5 (features.h5, matches.h5) and a COLMAP database, "
+        "locally or on Ray, resumable",
+    )
+    p.add_argument("pairs", help="pairs file: one 'name0 name1' per line (hloc's format)")
+    p.add_argument("images", help="the image folder the names are relative to")
+    p.add_argument("-o", "--output", required=True, help="output folder")
+    p.add_argument(
+        "--geometry",
+        default="fundamental",
+        help="comma-separated: homography, fundamental, relative_pose ('' for none; "
+        "default: %(default)s)",
+    )
+    p.add_argument(
+        "--cameras",
+        help="camera file: 'name MODEL width height params...' per image (COLMAP models); "
+        "default: SIMPLE_PINHOLE, f = 1.2 max(W, H)",
+    )
+    p.add_argument("--colmap", action="store_true", help="also write database.db (pycolmap)")
+    p.add_argument("--workers", type=int, default=None, help="local processes (default: cores)")
+    p.add_argument(
+        "--threads-per-worker", type=int, default=1, help="threads per worker (default: 1)"
+    )
+    p.add_argument(
+        "--ray",
+        metavar="ADDRESS",
+        default=None,
+        help="run on the Ray cluster at ADDRESS ('auto', host:port, ray://host:port)",
+    )
+    p.add_argument("--chunk-size", type=int, default=4, help="pairs per task (default: 4)")
+    p.add_argument(
+        "--cache",
+        action=argparse.BooleanOptionalAction,
+        default=True,
+        help="keep each image's features on disk (<output>/cache; default: on)",
+    )
+    p.add_argument("--resume", action="store_true", help="skip the pairs already written")
+    p.add_argument("--overwrite", action="store_true", help="replace earlier outputs")
+    p.add_argument("--retries", type=int, default=2, help="resubmissions of a dead worker's pairs")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--matcher",
+        choices=MATCHERS,
+        default=None,
+        help=f"default: {PIPELINE_DEFAULTS['matcher']}",
+    )
+    p.add_argument("--shape-model", default=None, help="a shape-v1 ONNX network")
+    p.add_argument(
+        "--max-keypoints",
+        type=int,
+        default=PIPELINE_DEFAULTS["max_keypoints"],
+        help="keypoints per image (default: %(default)s)",
+    )
+    p.add_argument("--max-side", type=int, default=None, help="working resolution (px)")
+    p.add_argument("--views", choices=["auto", "full", "off"], default=PIPELINE_DEFAULTS["views"])
+    p.add_argument(
+        "--refine-affine",
+        action=argparse.BooleanOptionalAction,
+        default=PIPELINE_DEFAULTS["refine_affine"],
+    )
+    p.set_defaults(run=cmd_batch)
 
     p = sub.add_parser("demo", help="the pipeline on graffiti 1->3 with its ground-truth H")
     p.add_argument("-o", "--out", type=Path, default=Path("affcorr_demo.png"))
