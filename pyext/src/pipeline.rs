@@ -48,6 +48,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     d.set_item("dense_matches", defaults::DENSE_MATCHES)?;
     d.set_item("refine_affine", defaults::REFINE_AFFINE)?;
     d.set_item("views", defaults::VIEWS.name())?;
+    d.set_item("view_relative_budget", defaults::VIEW_RELATIVE_BUDGET)?;
     d.set_item("seed", defaults::SEED)?;
     d.set_item("homography_threshold", defaults::HOMOGRAPHY_THRESHOLD)?;
     d.set_item("fundamental_threshold", defaults::FUNDAMENTAL_THRESHOLD)?;
@@ -145,7 +146,8 @@ type MatchTuple<'py> = (
 );
 
 /// The view cascade's report: one dict per view tried (`label`, `image` "A" | "B" | None,
-/// `rotation` (rad), `scale`, `tilt`, `tilt_angle` (rad), `guided`, `matches`, `inliers`,
+/// `rotation` (rad), `scale`, `tilt`, `tilt_angle` (rad), `guided`, `window`, `other_scale`,
+/// `matches`, `inliers`,
 /// `verified`, `seconds`, and `used`: whether its ACs are the result's, `Matches::view`).
 fn view_reports<'py>(py: Python<'py>, m: &Matches) -> PyResult<Bound<'py, PyList>> {
     let out = PyList::empty(py);
@@ -165,6 +167,8 @@ fn view_reports<'py>(py: Python<'py>, m: &Matches) -> PyResult<Bound<'py, PyList
         d.set_item("tilt", v.view.tilt)?;
         d.set_item("tilt_angle", v.view.tilt_angle)?;
         d.set_item("guided", v.view.guided.map(|m| m.to_vec()))?;
+        d.set_item("window", v.view.window.map(|w| w.to_vec()))?;
+        d.set_item("other_scale", v.view.other_scale)?;
         d.set_item("matches", v.matches)?;
         d.set_item("inliers", v.inliers)?;
         d.set_item("verified", v.verified)?;
@@ -216,7 +220,7 @@ impl PipelineRunner {
         max_matches = None, max_side = None, threads = None, seed = None,
         refine_affine = defaults::REFINE_AFFINE, drop_unreliable = false,
         views = None, view_budget = None,
-        max_views = None
+        view_relative_budget = defaults::VIEW_RELATIVE_BUDGET, max_views = None
     ))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -237,6 +241,7 @@ impl PipelineRunner {
         drop_unreliable: bool,
         views: Option<&str>,
         view_budget: Option<f64>,
+        view_relative_budget: Option<f64>,
         max_views: Option<&Bound<'_, PyAny>>,
     ) -> PyResult<Self> {
         // Integer options: Python or numpy ints, each bounded and named in its errors.
@@ -303,6 +308,15 @@ impl PipelineRunner {
             }
             view_options.time_budget = Some(Duration::from_secs_f64(seconds));
         }
+        if let Some(r) = view_relative_budget
+            && !(r > 0.0 && r.is_finite())
+        {
+            return Err(PyValueError::new_err(format!(
+                "view_relative_budget must be a positive number (times the plain pass) or None, \
+                 got {r}"
+            )));
+        }
+        view_options.relative_budget = view_relative_budget;
         if let Some(n) = max_views {
             view_options.max_views = to_usize(n);
         }

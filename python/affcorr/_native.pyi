@@ -390,6 +390,7 @@ class PipelineRunner:
         drop_unreliable: bool = False,
         views: str | None = None,
         view_budget: float | None = None,
+        view_relative_budget: float | None = ...,
         max_views: int | None = None,
     ) -> PipelineRunner: ...
     def estimate(

@@ -110,6 +110,7 @@ def _pipeline(args):
         drop_unreliable=args.drop_unreliable,
         views=args.views,
         view_budget=args.view_budget,
+        view_relative_budget=args.view_relative_budget,
     )
 
 
@@ -167,6 +168,13 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
         type=float,
         default=None,
         help="seconds after which the view cascade starts no new view (default: no limit)",
+    )
+    p.add_argument(
+        "--view-relative-budget",
+        type=lambda v: None if v.lower() == "none" else float(v),
+        default=PIPELINE_DEFAULTS["view_relative_budget"],
+        help="the view cascade starts no new view once it has taken this many times the plain "
+        "pass ('none': no limit; default: %(default)s)",
     )
 
 

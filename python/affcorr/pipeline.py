@@ -126,7 +126,9 @@ class MatchResult:
             these.
         views: the view cascade's report, one dict per view tried, the plain pair first
             (``label``, ``image`` "A" / "B" / None, ``rotation`` and ``tilt_angle`` in
-            radians, ``scale``, ``tilt``, ``guided``, ``matches``, ``inliers``, ``verified``,
+            radians, ``scale``, ``tilt``, ``guided``, ``window`` (the tile matched, as
+            fractions ``[x0, y0, x1, y1]``, or None), ``other_scale`` (the other image's
+            zoom), ``matches``, ``inliers``, ``verified``,
             ``seconds``, ``used``: whether its ACs are the result's); empty when the cascade
             did not run (``views="off"``, dense matchers).
     """
@@ -199,6 +201,10 @@ class Pipeline:
             the view's warp; ``"full"`` tries every view and keeps the best; ``"off"`` the
             plain pair only. Easy pairs cost one verification. See :attr:`MatchResult.views`.
         view_budget: seconds after which the cascade starts no new view (None: no limit).
+        view_relative_budget: the cascade starts no new view once it has taken this many
+            times the plain pass (the default: ``PIPELINE_DEFAULTS["view_relative_budget"]``;
+            None: no limit). It bounds what a pair that no view solves costs, on any machine
+            and image size.
         max_views: at most this many synthetic views (None: the default, 64).
         channel_order: ``"bgr"`` for ``cv2.imread`` arrays (files are decoded by their own
             format; torch tensors ``(C, H, W)`` are accepted).
@@ -237,6 +243,7 @@ class Pipeline:
         drop_unreliable: bool = False,
         views: str = _D["views"],
         view_budget: float | None = None,
+        view_relative_budget: float | None = PIPELINE_DEFAULTS["view_relative_budget"],
         max_views: int | None = None,
         channel_order: str = "rgb",
     ) -> None:
@@ -290,6 +297,7 @@ class Pipeline:
             drop_unreliable=bool(drop_unreliable),
             views=views,
             view_budget=view_budget,
+            view_relative_budget=view_relative_budget,
             max_views=_positive(max_views, "max_views"),
         )
         # The models and thread pools belong to this process; a forked child (multiprocessing
