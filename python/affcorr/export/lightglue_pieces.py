@@ -423,6 +423,7 @@ class AdaptiveGlueOnnx:
         directory: Path | str | None = None,
         threads: int = 2,
         prefix: str = "xfeat_lighterglue",
+        layer_models: list | None = None,
     ):
         import onnxruntime as ort
 
@@ -444,6 +445,11 @@ class AdaptiveGlueOnnx:
         self.n_layers = int(meta.get("affcorr.layers"))
         self.thresholds = [float(t) for t in meta.get("affcorr.glue.confidence_thresholds")]
         self.last_stop = 0
+        # variants: one model per layer (no ``layer`` input) instead of the shared graph
+        self.per_layer = [
+            ort.InferenceSession(str(p), so, providers=["CPUExecutionProvider"])
+            for p in (layer_models or [])
+        ]
 
     def run(
         self,
@@ -472,28 +478,25 @@ class AdaptiveGlueOnnx:
         ind0, ind1 = np.arange(m), np.arange(n)
         i = 0
         for i in range(self.n_layers):
-            x0, x1, t0, t1, p0, p1 = self.sess["layer"].run(
-                None,
-                {
-                    "layer": np.array([i], np.int64),
-                    "desc0": x0,
-                    "desc1": x1,
-                    "cos0": c0,
-                    "sin0": s0,
-                    "cos1": c1,
-                    "sin1": s1,
-                },
-            )
+            feed = {"desc0": x0, "desc1": x1, "cos0": c0, "sin0": s0, "cos1": c1, "sin1": s1}
+            if self.per_layer:
+                outs = self.per_layer[i].run(None, feed)
+            else:
+                outs = self.sess["layer"].run(None, {"layer": np.array([i], np.int64), **feed})
+            x0, x1, t0, t1, p0, p1 = outs
             if i == self.n_layers - 1:
                 break
-            th = self.thresholds[i]
+            th = f32(self.thresholds[i])
             if depth_confidence > 0:
                 unconfident = int((t0 < th).sum() + (t1 < th).sum())
-                if 1.0 - unconfident / (m + n) > depth_confidence:
+                # float32, as kornia (and the Rust loop)
+                ratio = f32(1.0) - f32(unconfident) / f32(m + n)
+                if ratio > f32(depth_confidence):
                     break
             if width_confidence > 0:
-                keep0 = p0[0] > 1.0 - width_confidence
-                keep1 = p1[0] > 1.0 - width_confidence
+                cut = f32(1.0 - width_confidence)
+                keep0 = p0[0] > cut
+                keep1 = p1[0] > cut
                 if depth_confidence > 0:
                     keep0 |= t0[0] <= th
                     keep1 |= t1[0] <= th
@@ -577,3 +580,70 @@ def main(argv=None) -> None:
 
 if __name__ == "__main__":
     main()
+
+
+# ---------------------------------------------------------------- variants (measured, not shipped)
+
+
+def fixed_layer_models(layer_path: Path, out: Path, n_layers: int) -> list[Path]:
+    """One model per layer from the shared layer graph: ``layer`` fixed as an initializer and
+    the weight Gathers constant-folded by onnxruntime's basic (hardware-independent)
+    optimisation, so that the weights are initializers again (what dynamic quantisation and
+    ORT's weight prepacking need)."""
+    import onnx
+    import onnxruntime as ort
+    from onnx import numpy_helper
+
+    out.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for i in range(n_layers):
+        m = onnx.load(str(layer_path))
+        g = m.graph
+        g.input.remove(next(x for x in g.input if x.name == "layer"))
+        g.initializer.append(numpy_helper.from_array(np.array([i], np.int64), "layer"))
+        raw = out / f"layer{i}_raw.onnx"
+        onnx.save(m, str(raw))
+        so = ort.SessionOptions()
+        so.graph_optimization_level = ort.GraphOptimizationLevel.ORT_ENABLE_BASIC
+        so.optimized_model_filepath = str(out / f"layer{i}.onnx")
+        ort.InferenceSession(str(raw), so, providers=["CPUExecutionProvider"])
+        raw.unlink()
+        paths.append(out / f"layer{i}.onnx")
+    return paths
+
+
+def quantize_int8(paths: list[Path], out: Path) -> list[Path]:
+    """Dynamic int8 quantisation (onnxruntime.quantization, weights per channel) of MatMuls."""
+    from onnxruntime.quantization import QuantType, quantize_dynamic
+
+    res = []
+    for p in paths:
+        q = out / (p.stem + "_int8.onnx")
+        quantize_dynamic(str(p), str(q), weight_type=QuantType.QInt8, per_channel=True)
+        res.append(q)
+    return res
+
+
+def fp16_weights(path: Path, out: Path) -> Path:
+    """The model with its float initializers stored as float16 and cast back to float32 in the
+    graph (half the file; onnxruntime folds the casts at load, so the arithmetic stays float32
+    with fp16-rounded weights)."""
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    m = onnx.load(str(path))
+    g = m.graph
+    casts = []
+    for init in list(g.initializer):
+        if init.data_type != TensorProto.FLOAT or np.prod(init.dims) < 64:
+            continue
+        arr = numpy_helper.to_array(init).astype(np.float16)
+        name = init.name
+        g.initializer.remove(init)
+        g.initializer.append(numpy_helper.from_array(arr, name + "_fp16"))
+        casts.append(helper.make_node("Cast", [name + "_fp16"], [name], to=TensorProto.FLOAT))
+    for node in reversed(casts):
+        g.node.insert(0, node)
+    dst = out / path.name
+    onnx.save(m, str(dst))
+    return dst
