@@ -155,6 +155,10 @@ fn options(r: &mut Reader, n: usize) -> EstimatorOptions {
         quality,
         scoring,
         affine_weight,
+        affine_confidence: r
+            .u8()
+            .is_multiple_of(4)
+            .then(|| (0..n).map(|_| r.f64()).collect()),
     }
 }
 

@@ -338,6 +338,43 @@ pub fn sampson_affine_grad(f: &Mat3, ac: &AffineCorrespondence) -> [AffineSampso
     [affine_row_grad(&t, 0), affine_row_grad(&t, 1)]
 }
 
+/// The signed affine Sampson residuals s_k = r_k / √G_k (so s_k² = SD_A,k) and their gradients
+/// w.r.t. F (row-major), for least squares over F: ∂s_k = ∂r_k / √G_k − r_k ∂(G_k/2) / G_k^{3/2},
+/// with ∂r_k and ∂G_k/2 as in the module docs. A row with G_k = 0 gives (0, zeros).
+#[inline]
+pub fn sampson_affine_signed_grad_f(f: &Mat3, ac: &AffineCorrespondence) -> [(f64, [f64; 9]); 2] {
+    let t = affine_terms(f, ac);
+    std::array::from_fn(|k| {
+        let (r, g) = (t.r[k], t.g[k]);
+        if !(g > 0.0) {
+            return (0.0, [0.0; 9]);
+        }
+        let inv = 1.0 / g.sqrt();
+        let c = r * inv * inv * inv; // r / G^{3/2}
+        let (fe, l1, b) = (&t.f, &t.l1, &t.b[k]);
+        let mut d_f = [0.0; 9];
+        for m in 0..3 {
+            for n in 0..3 {
+                let mut dr = if n == k { t.p2[m] } else { 0.0 };
+                let mut dg = 0.0;
+                if m < 2 {
+                    let amk = t.a[m][k];
+                    dr += amk * t.p1[n];
+                    dg = l1[m] * t.p1[n];
+                    if n < 2 {
+                        dg += b[n] * amk;
+                    }
+                    if n == k {
+                        dg += fe[m][k];
+                    }
+                }
+                d_f[3 * m + n] = dr * inv - c * dg;
+            }
+        }
+        (r * inv, d_f)
+    })
+}
+
 #[inline(always)]
 fn affine_row_grad(t: &AffineTerms, k: usize) -> AffineSampsonGrad {
     let (r, g) = (t.r[k], t.g[k]);
@@ -798,6 +835,46 @@ mod tests {
         }
         eprintln!("worst relative gradient error: {worst:e}");
         assert!(worst < 1e-6, "{worst}");
+    }
+
+    #[test]
+    fn signed_affine_residuals_square_to_sd_a_and_their_f_gradients_match_differences() {
+        let mut rng = Pcg64::seed_from_u64(15);
+        for _ in 0..20 {
+            let (f, acs) = perturbed(&mut rng, 10);
+            for ac in &acs {
+                let signed = sampson_affine_signed_grad_f(&f, ac);
+                let sd = sampson_affine(&f, ac);
+                for k in 0..2 {
+                    let (s, g) = signed[k];
+                    assert!(
+                        (s * s - sd[k]).abs() <= 1e-12 * sd[k].max(1e-300),
+                        "{s} {sd:?}"
+                    );
+                    for q in 0..9 {
+                        let h = 1e-6 * f[(q / 3, q % 3)].abs().max(1e-4);
+                        let (mut fp, mut fm) = (f, f);
+                        fp[(q / 3, q % 3)] += h;
+                        fm[(q / 3, q % 3)] -= h;
+                        let fd = (sampson_affine_signed_grad_f(&fp, ac)[k].0
+                            - sampson_affine_signed_grad_f(&fm, ac)[k].0)
+                            / (2.0 * h);
+                        let scale = g.iter().fold(0.0f64, |a, v| a.max(v.abs()));
+                        assert!(
+                            (fd - g[q]).abs() < 1e-6 * scale,
+                            "F[{q}] row {k}: {fd} vs {}",
+                            g[q]
+                        );
+                    }
+                }
+            }
+        }
+        // A degenerate F (all zeros) gives zeros, not NaN.
+        let (_, acs) = exact(&mut rng, 1);
+        assert_eq!(
+            sampson_affine_signed_grad_f(&Mat3::zeros(), &acs[0]),
+            [(0.0, [0.0; 9]); 2]
+        );
     }
 
     #[test]

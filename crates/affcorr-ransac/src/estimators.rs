@@ -63,6 +63,10 @@ pub struct EstimatorOptions {
     /// Weight λ of the affine residual in scoring (0, the default: points only). See each
     /// problem's module for its units.
     pub affine_weight: f64,
+    /// Per-AC confidence in [0, 1] of the affine part ((N, 8) data only): it scales each AC's
+    /// affine term in scoring (with `affine_weight`) and in the refinements (with
+    /// [`RansacOptions::affine_refinement`]); 0 makes an AC a point. `None` (default): all 1.
+    pub affine_confidence: Option<Vec<f64>>,
 }
 
 fn sample_kind(data: &Correspondences, opts: &EstimatorOptions) -> Result<SampleKind> {
@@ -74,7 +78,38 @@ fn sample_kind(data: &Correspondences, opts: &EstimatorOptions) -> Result<Sample
     });
     check_kind(data, kind)?;
     check_affine_weight(opts.affine_weight, data)?;
+    check_affine_confidence(opts.affine_confidence.as_deref(), data)?;
     Ok(kind)
+}
+
+/// Validates per-AC confidences: one per datum, each in [0, 1], only with affine data.
+fn check_affine_confidence(c: Option<&[f64]>, data: &Correspondences) -> Result<()> {
+    let Some(c) = c else {
+        return Ok(());
+    };
+    let bad = |value: String, reason| {
+        Err(RansacError::InvalidOption {
+            name: "affine_confidence",
+            value,
+            reason,
+        })
+    };
+    if !data.has_affine() {
+        return bad(
+            format!("{} values", c.len()),
+            "needs (N, 8) correspondences with their A",
+        );
+    }
+    if c.len() != data.len() {
+        return bad(
+            format!("{} values for {} correspondences", c.len(), data.len()),
+            "needs one value per correspondence",
+        );
+    }
+    if let Some(i) = c.iter().position(|v| !(0.0..=1.0).contains(v)) {
+        return bad(format!("{} at index {i}", c[i]), "must be in [0, 1]");
+    }
+    Ok(())
 }
 
 fn run<P: Problem>(
@@ -135,7 +170,8 @@ pub fn estimate_homography(
 ) -> Result<Estimate<Mat3>> {
     let kind = sample_kind(data, opts)?;
     run(
-        &HomographyProblem::new(data, kind, opts.affine_weight),
+        &HomographyProblem::new(data, kind, opts.affine_weight)
+            .with_affine_confidence(opts.affine_confidence.as_deref()),
         opts,
         ScoringKind::Msac,
     )
@@ -148,7 +184,8 @@ pub fn estimate_fundamental(
 ) -> Result<Estimate<Mat3>> {
     let kind = sample_kind(data, opts)?;
     run(
-        &FundamentalProblem::new(data, kind, opts.affine_weight, opts.ransac.threshold),
+        &FundamentalProblem::new(data, kind, opts.affine_weight, opts.ransac.threshold)
+            .with_affine_confidence(opts.affine_confidence.as_deref()),
         opts,
         ScoringKind::Magsac,
     )
@@ -173,7 +210,8 @@ pub fn estimate_relative_pose(
         kind,
         opts.affine_weight,
         LO_SCHEDULE[0] * opts.ransac.threshold,
-    );
+    )
+    .with_affine_confidence(opts.affine_confidence.as_deref());
     let mut est = run(&problem, opts, ScoringKind::Magsac)?;
     let idx: Vec<usize> = (0..data.len()).filter(|&i| est.inliers[i]).collect();
     let (x1, x2): (Vec<_>, Vec<_>) = idx

@@ -75,6 +75,6 @@ pub use estimators::{
     estimate_fundamental_batch, estimate_homography, estimate_homography_batch,
     estimate_relative_pose, estimate_relative_pose_batch,
 };
-pub use options::{LoKind, RansacOptions};
+pub use options::{AffineRefinement, LoKind, RansacOptions};
 pub use problem::Problem;
 pub use problems::{Correspondences, SampleKind};

@@ -5,7 +5,7 @@
 //! [`crate::LoKind::GraphCut`], the graph-cut labelling of [`LoGraph`] (GC-RANSAC).
 
 use crate::graph_cut::GraphCut;
-use crate::options::RansacOptions;
+use crate::options::{AffineRefinement, RansacOptions};
 use crate::problem::Problem;
 use crate::refine::LmOptions;
 use crate::score::Scoring;
@@ -96,6 +96,7 @@ pub(crate) fn local_optimization<P: Problem, S: Scoring>(
                     &scoring.lo_loss(threshold_sq),
                     &LmOptions {
                         max_iterations: LO_LM_ITERATIONS,
+                        affine: options.affine_refinement == AffineRefinement::All,
                         ..Default::default()
                     },
                 )

@@ -45,6 +45,22 @@ pub enum LoKind {
     GraphCut,
 }
 
+/// Where the affine Sampson terms of ACs enter the least-squares fits of a model (AC data only;
+/// point data ignore it). Each AC then adds its two affine residuals, whitened by the noise
+/// scale of A that the fit estimates from its inliers (the ratio of the median point to the
+/// median affine Sampson distance), weighted by the AC's confidence and under a Cauchy loss so
+/// that a poor A is down-weighted (docs/estimation.md).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum AffineRefinement {
+    /// Points only (default).
+    #[default]
+    Off,
+    /// In the final Levenberg–Marquardt refinement.
+    Final,
+    /// In local optimisation's refinements and the final one.
+    All,
+}
+
 /// Options of [`crate::engine::estimate`]. Defaults are documented at each field.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RansacOptions {
@@ -83,6 +99,9 @@ pub struct RansacOptions {
     pub sprt: bool,
     /// Stops the loop early when set (see [`Cancel`]). Default `None`.
     pub cancel: Option<Cancel>,
+    /// Where the affine terms enter the refinements ([`AffineRefinement`]). Default
+    /// [`AffineRefinement::Off`].
+    pub affine_refinement: AffineRefinement,
 }
 
 impl Default for RansacOptions {
@@ -100,6 +119,7 @@ impl Default for RansacOptions {
             final_refinement: true,
             sprt: true,
             cancel: None,
+            affine_refinement: AffineRefinement::Off,
         }
     }
 }

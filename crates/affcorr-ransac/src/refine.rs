@@ -57,6 +57,9 @@ pub struct LmOptions {
     /// not tighten with N: on 1000 inliers with a truncated loss, 1e-6 of the cost kept LM
     /// chasing the few residuals that cross the threshold for 4 more steps of no gain.
     pub noise_fraction: f64,
+    /// Add the affine terms of ACs to the cost where the problem has them
+    /// ([`crate::options::AffineRefinement`]). Default false.
+    pub affine: bool,
 }
 
 impl Default for LmOptions {
@@ -66,6 +69,7 @@ impl Default for LmOptions {
             cost_tolerance: 1e-6,
             step_tolerance: 1e-10,
             noise_fraction: 0.01,
+            affine: false,
         }
     }
 }

@@ -6,12 +6,196 @@
 //! ∂r/∂F_mn = p2_m p1_n / √d − e / (2 d^{3/2}) · ∂d/∂F_mn, with
 //! ∂d/∂F_mn = 2 (F p1)_m p1_n [m < 2] + 2 (Fᵀ p2)_n p2_m [n < 2].
 //! A model with tangent basis ∂F/∂θ_k (k < dof) then has Jacobian rows J_k = ⟨∂r/∂F, ∂F/∂θ_k⟩.
+//!
+//! With [`AffineTerms`], each AC i adds its two signed affine Sampson residuals s_k = r_k/√G_k
+//! (s_k² = SD_A,k, docs/design.md §3; gradients in `affcorr_geom::sampson`), whitened by λ
+//! (px² per unit² of A: the ratio of the point to the affine noise variance, [`affine_scale`])
+//! and weighted by the AC's confidence c_i: cost Σ_i c_i Σ_k ρ_A(λ s_k²), ρ_A the Cauchy loss
+//! at the inlier threshold, so an AC whose A is far off pulls little.
 
 use super::Correspondences;
 use super::simd::{BLOCK, dispatch, dot};
 use crate::loss::Loss;
 use crate::refine::{Mat9, Vec9};
 use affcorr_geom::Mat3;
+use affcorr_geom::sampson::{sampson_affine, sampson_affine_signed_grad_f, sampson_point};
+
+/// The affine part of an epipolar refinement (see the module docs).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct AffineTerms<'a> {
+    /// λ: px² per unit² of A.
+    pub lambda: f64,
+    /// Per-AC confidence c_i in [0, 1] (all 1 when `None`).
+    pub confidence: Option<&'a [f64]>,
+    /// ρ_A, of λ s_k² (px²).
+    pub loss: Loss,
+}
+
+impl AffineTerms<'_> {
+    #[inline]
+    fn confidence(&self, i: usize) -> f64 {
+        self.confidence.map_or(1.0, |c| c[i])
+    }
+}
+
+/// The affine terms of a refinement under `options` starting at `f` on `inliers`, or `None`
+/// (points only) when `options.affine` is off, the data have no A, or λ cannot be estimated.
+/// ρ_A is the Cauchy loss at 3σ̂ of the point residuals (σ̂² = median SD_P / 0.455, the median
+/// of χ²₁), so it needs no threshold.
+pub(crate) fn affine_terms<'c>(
+    data: &Correspondences,
+    f: &Mat3,
+    inliers: &[usize],
+    confidence: Option<&'c [f64]>,
+    options: &crate::refine::LmOptions,
+) -> Option<AffineTerms<'c>> {
+    if !options.affine {
+        return None;
+    }
+    let (lambda, point_median) = affine_scale(data, f, inliers, confidence)?;
+    Some(AffineTerms {
+        lambda,
+        confidence,
+        loss: Loss::Cauchy {
+            scale_sq: (9.0 * point_median / CHI2_1_MEDIAN).max(1e-12),
+        },
+    })
+}
+
+/// Most rounds of estimate-λ-then-refine in one refinement: the model the scale is first
+/// estimated at fits the points only, so its affine residuals overstate the noise of A (F has
+/// directions that points barely fix); refitting with the new λ and re-estimating reaches the
+/// scale of the joint fit in 2–3 rounds.
+pub(crate) const AFFINE_ROUNDS: usize = 4;
+
+/// Whether λ at the refined `f` differs from the `lambda` it was refined with by more than 20%
+/// (always false without affine terms, or with a single LM pass to spare).
+pub(crate) fn rescale_again(
+    data: &Correspondences,
+    f: &Mat3,
+    inliers: &[usize],
+    confidence: Option<&[f64]>,
+    lambda: Option<f64>,
+) -> bool {
+    let Some(old) = lambda else {
+        return false;
+    };
+    affine_scale(data, f, inliers, confidence).is_some_and(|(new, _)| {
+        let r = new / old;
+        !(0.8..=1.25).contains(&r)
+    })
+}
+
+/// The median of χ²₁.
+const CHI2_1_MEDIAN: f64 = 0.454_936_423_119_572_8;
+
+/// Largest λ (px² per unit² of A) that [`affine_scale`] returns: A exact to 0.05% at 0.5 px of
+/// point noise. The affine terms of exact ACs then dominate, as they should, without making the
+/// normal equations singular in the directions points alone fix.
+pub(crate) const MAX_AFFINE_SCALE: f64 = 1e6;
+
+/// (λ, median SD_P) estimated on `indices` under `f`: λ is the median SD_P over the median
+/// SD_A,k (each a squared residual with one degree of freedom, so the ratio of their medians is
+/// the ratio of the noise variances). `None` when fewer than 5 of them carry a confidence
+/// above 0 (too few to tell the scale; the fit then uses points only).
+pub(crate) fn affine_scale(
+    data: &Correspondences,
+    f: &Mat3,
+    indices: &[usize],
+    confidence: Option<&[f64]>,
+) -> Option<(f64, f64)> {
+    if !data.has_affine() {
+        return None;
+    }
+    let (mut p, mut a) = (Vec::with_capacity(indices.len()), Vec::new());
+    a.reserve(2 * indices.len());
+    for &i in indices {
+        if confidence.is_some_and(|c| c[i] <= 0.0) {
+            continue;
+        }
+        let ac = data.ac(i);
+        p.push(sampson_point(f, &ac.points()));
+        let [a0, a1] = sampson_affine(f, &ac);
+        a.push(a0);
+        a.push(a1);
+    }
+    if p.len() < 5 {
+        return None;
+    }
+    let median = |v: &mut Vec<f64>| {
+        let k = v.len() / 2;
+        *v.select_nth_unstable_by(k, f64::total_cmp).1
+    };
+    let (mp, ma) = (median(&mut p), median(&mut a));
+    if !(mp.is_finite() && ma.is_finite()) {
+        return None;
+    }
+    if ma * MAX_AFFINE_SCALE <= mp || ma == 0.0 {
+        let lambda = if mp > 0.0 {
+            MAX_AFFINE_SCALE
+        } else {
+            super::SEED_AFFINE_WEIGHT
+        };
+        return Some((lambda, mp));
+    }
+    Some((mp / ma, mp))
+}
+
+/// Σ_i c_i Σ_k ρ_A(λ s_k²) over `indices` under `f`.
+pub(crate) fn affine_cost(
+    data: &Correspondences,
+    f: &Mat3,
+    indices: &[usize],
+    terms: &AffineTerms<'_>,
+) -> f64 {
+    let mut cost = 0.0;
+    for &i in indices {
+        let c = terms.confidence(i);
+        if c <= 0.0 {
+            continue;
+        }
+        let [a0, a1] = sampson_affine(f, &data.ac(i));
+        cost += c * (terms.loss.cost(terms.lambda * a0) + terms.loss.cost(terms.lambda * a1));
+    }
+    cost
+}
+
+/// [`normal_equations`] of the affine terms: adds their JᵀWJ and JᵀWr for the tangent `basis`
+/// and returns their cost.
+pub(crate) fn affine_normal_equations(
+    data: &Correspondences,
+    f: &Mat3,
+    basis: &[Mat3],
+    indices: &[usize],
+    terms: &AffineTerms<'_>,
+    jtj: &mut Mat9,
+    jtr: &mut Vec9,
+) -> f64 {
+    let mut g_sum = [0.0; 9];
+    let mut gg = [0.0; 45];
+    let mut cost = 0.0;
+    for &i in indices {
+        let c = terms.confidence(i);
+        if c <= 0.0 {
+            continue;
+        }
+        for (s, g) in sampson_affine_signed_grad_f(f, &data.ac(i)) {
+            let (rho, w) = terms.loss.cost_and_weight(terms.lambda * s * s);
+            cost += c * rho;
+            let w = c * w * terms.lambda;
+            let mut k = 0;
+            for a in 0..9 {
+                g_sum[a] += w * s * g[a];
+                for b in a..9 {
+                    gg[k] += w * g[a] * g[b];
+                    k += 1;
+                }
+            }
+        }
+    }
+    project(&g_sum, &gg, basis, jtj, jtr);
+    cost
+}
 
 /// r and ∂r/∂F (row-major) of one correspondence.
 #[inline(always)]
@@ -95,13 +279,20 @@ pub(crate) fn normal_equations(
     jtj: &mut Mat9,
     jtr: &mut Vec9,
 ) -> f64 {
-    let dof = basis.len();
     let mut g_sum = [0.0; 9];
     let mut gg = [0.0; 45];
     let cost = dispatch(
         #[inline(always)]
         || accumulate(data, f, indices, loss, &mut g_sum, &mut gg),
     );
+    project(&g_sum, &gg, basis, jtj, jtr);
+    cost
+}
+
+/// Adds Bᵀ G B to `jtj` and Bᵀ g to `jtr` for G the symmetric matrix whose upper triangle is
+/// `gg` (row-major) and B the tangent `basis`.
+fn project(g_sum: &[f64; 9], gg: &[f64; 45], basis: &[Mat3], jtj: &mut Mat9, jtr: &mut Vec9) {
+    let dof = basis.len();
     let mut full = Mat9::zeros();
     let mut k = 0;
     for a in 0..9 {
@@ -111,7 +302,7 @@ pub(crate) fn normal_equations(
             k += 1;
         }
     }
-    let g_sum = Vec9::from_column_slice(&g_sum);
+    let g_sum = Vec9::from_column_slice(g_sum);
     let flat: [Vec9; 9] = std::array::from_fn(|k| {
         if k < dof {
             Vec9::from_column_slice(&affcorr_geom::types::mat3_to_row(&basis[k]))
@@ -126,7 +317,6 @@ pub(crate) fn normal_equations(
             jtj[(a, b)] += flat[b].dot(&ga);
         }
     }
-    cost
 }
 
 /// Σ ρ(r²) over `indices`, and adds Σ w r g to `g_sum` and the upper triangle of Σ w g gᵀ to
@@ -269,5 +459,95 @@ mod tests {
         for (a, b) in s1.iter().zip(&s2).chain(g1.iter().zip(&g2)) {
             assert!((a - b).abs() <= 1e-12 * a.abs().max(1e-300), "{a} vs {b}");
         }
+    }
+
+    /// A scene's exact ACs with Gaussian noise: `px` on x2, `rel` relative on A.
+    fn noisy_acs(seed: u64, n: usize, px: f64, rel: f64) -> (Mat3, Correspondences) {
+        use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
+        use rand::SeedableRng;
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+        let scene = PlaneScene::random(&mut rng);
+        let noise = NoiseModel {
+            planes: 3,
+            outlier_ratio: 0.0,
+            pixel_noise: px,
+            affine_noise: rel,
+        };
+        let (acs, _) = noisy_correspondences(&mut rng, &scene, n, &noise);
+        let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
+        (
+            scene.fundamental().normalize(),
+            Correspondences::from_ac_rows(&rows).unwrap(),
+        )
+    }
+
+    #[test]
+    fn affine_normal_equations_are_half_the_gradient_of_the_affine_cost() {
+        let (f, data) = noisy_acs(21, 40, 1.0, 0.05);
+        let idx: Vec<usize> = (0..40).collect();
+        let conf: Vec<f64> = (0..40).map(|i| (i % 5) as f64 / 4.0).collect();
+        let terms = AffineTerms {
+            lambda: 400.0,
+            confidence: Some(&conf),
+            loss: Loss::Cauchy { scale_sq: 2.0 },
+        };
+        let basis = [
+            Mat3::new(0.0, 1e-6, 0.0, -2e-6, 0.0, 1e-3, 0.0, -1e-3, 0.0),
+            Mat3::new(0.0, 0.0, 1e-3, 0.0, 0.0, 0.0, 2e-3, 0.0, 1e-2),
+            Mat3::new(3e-7, 0.0, 0.0, 0.0, -1e-6, 0.0, 0.0, 0.0, 0.0),
+        ];
+        let (mut jtj, mut jtr) = (Mat9::zeros(), Vec9::zeros());
+        let cost = affine_normal_equations(&data, &f, &basis, &idx, &terms, &mut jtj, &mut jtr);
+        assert!((cost - affine_cost(&data, &f, &idx, &terms)).abs() < 1e-12 * cost);
+        for (k, b) in basis.iter().enumerate() {
+            let h = 1e-4;
+            let fd = (affine_cost(&data, &(f + b * h), &idx, &terms)
+                - affine_cost(&data, &(f - b * h), &idx, &terms))
+                / (2.0 * h);
+            assert!(
+                (2.0 * jtr[k] - fd).abs() < 1e-5 * fd.abs().max(1e-9),
+                "θ{k}: {} vs {fd}",
+                2.0 * jtr[k]
+            );
+            // JᵀWJ is positive semi-definite and symmetric.
+            assert!(jtj[(k, k)] >= 0.0);
+        }
+        assert!((jtj - jtj.transpose()).norm() <= 1e-12 * jtj.norm());
+    }
+
+    #[test]
+    fn the_affine_scale_is_the_ratio_of_the_noise_variances() {
+        // With noise on x2 only, SD_P ≈ σ_x²·|l1|²/(|l1|² + |l2|²) and SD_A,k ≈ (σ_A a)², so
+        // the ratio λ scales as σ_x² / σ_A²: 4× the affine noise divides it by ~16, 2× the
+        // point noise multiplies it by ~4.
+        let idx: Vec<usize> = (0..600).collect();
+        let scale = |px, rel| {
+            let (f, data) = noisy_acs(22, 600, px, rel);
+            affine_scale(&data, &f, &idx, None).unwrap().0
+        };
+        let base = scale(0.5, 0.01);
+        let r_affine = base / scale(0.5, 0.04);
+        let r_points = scale(1.0, 0.01) / base;
+        assert!((r_affine / 16.0 - 1.0).abs() < 0.25, "{r_affine}");
+        assert!((r_points / 4.0 - 1.0).abs() < 0.25, "{r_points}");
+        // Exact A (only the noise of x2 reaches the affine residuals): a far larger scale,
+        // capped; exact data: a finite scale; too few confident ACs or no A: none.
+        let (f, data) = noisy_acs(22, 600, 0.5, 0.0);
+        let exact = affine_scale(&data, &f, &idx, None).unwrap().0;
+        assert!(
+            exact > 50.0 * base && exact <= MAX_AFFINE_SCALE,
+            "{exact} vs {base}"
+        );
+        let (f0, data0) = noisy_acs(22, 600, 0.0, 0.0);
+        let capped = affine_scale(&data0, &f0, &idx, None).unwrap().0;
+        assert!(capped > 0.0 && capped <= MAX_AFFINE_SCALE, "{capped}");
+        let mut conf = vec![0.0; 600];
+        conf[..4].fill(1.0);
+        assert!(affine_scale(&data, &f, &idx, Some(&conf)).is_none());
+        let points = Correspondences {
+            a: Vec::new(),
+            ..data
+        };
+        assert!(affine_scale(&points, &f, &idx, None).is_none());
     }
 }

@@ -33,6 +33,8 @@ pub struct FundamentalProblem<'a> {
     data: &'a Correspondences,
     kind: SampleKind,
     affine_weight: f64,
+    /// Per-AC confidence in [0, 1] of the affine terms (scoring and refinement).
+    confidence: Option<&'a [f64]>,
     threshold: f64,
     /// Hartley normalisations of the two images (centroid at 0, mean distance √2): the
     /// refinement parametrises F̃ = T2⁻ᵀ F T1⁻¹, whose singular values are of one order, where
@@ -55,10 +57,18 @@ impl<'a> FundamentalProblem<'a> {
             data,
             kind,
             affine_weight,
+            confidence: None,
             threshold,
             t1: hartley(&data.x1),
             t2: hartley(&data.x2),
         }
+    }
+
+    /// Weighs each AC's affine terms (in scoring and in the refinements) by `confidence` (one
+    /// value in [0, 1] per datum, checked by the estimators).
+    pub fn with_affine_confidence(mut self, confidence: Option<&'a [f64]>) -> Self {
+        self.confidence = confidence;
+        self
     }
 
     /// The pixel F of a normalised F̃: T2ᵀ F̃ T1.
@@ -85,9 +95,16 @@ impl<'a> FundamentalProblem<'a> {
     }
 }
 
-/// Squared Sampson residual (point, plus weighted affine) of datum `i` under `f`.
+/// Squared Sampson residual (point, plus weighted affine) of datum `i` under `f`; the affine
+/// weight is scaled by the datum's confidence, if any.
 #[inline(always)]
-fn epipolar_residual(data: &Correspondences, f: &Mat3, affine_weight: f64, i: usize) -> f64 {
+fn epipolar_residual(
+    data: &Correspondences,
+    f: &Mat3,
+    affine_weight: f64,
+    confidence: Option<&[f64]>,
+    i: usize,
+) -> f64 {
     let points = PointCorrespondence {
         x1: data.x1[i],
         x2: data.x2[i],
@@ -96,7 +113,8 @@ fn epipolar_residual(data: &Correspondences, f: &Mat3, affine_weight: f64, i: us
         return sampson_point(f, &points);
     }
     let [a0, a1] = sampson_affine(f, &data.ac(i));
-    sampson_point(f, &points) + affine_weight * (a0 + a1)
+    let w = affine_weight * confidence.map_or(1.0, |c| c[i]);
+    sampson_point(f, &points) + w * (a0 + a1)
 }
 
 /// The data that can seed a good AC sample under `f` (`Problem::sample_support`); `None` for
@@ -110,7 +128,7 @@ pub(crate) fn epipolar_seeds(
     let w = SEED_AFFINE_WEIGHT;
     (kind == SampleKind::Affine).then(|| {
         count_below(data.len(), threshold_sq, |i| {
-            epipolar_residual(data, f, w, i)
+            epipolar_residual(data, f, w, None, i)
         })
     })
 }
@@ -120,12 +138,13 @@ pub(crate) fn epipolar_residuals(
     data: &Correspondences,
     f: &Mat3,
     affine_weight: f64,
+    confidence: Option<&[f64]>,
     start: usize,
     out: &mut [f64],
 ) {
     if affine_weight != 0.0 {
         for (k, o) in out.iter_mut().enumerate() {
-            *o = epipolar_residual(data, f, affine_weight, start + k);
+            *o = epipolar_residual(data, f, affine_weight, confidence, start + k);
         }
         return;
     }
@@ -151,11 +170,12 @@ pub(crate) fn epipolar_residuals_at(
     data: &Correspondences,
     f: &Mat3,
     affine_weight: f64,
+    confidence: Option<&[f64]>,
     indices: &[usize],
     out: &mut [f64],
 ) {
     for (o, &i) in out.iter_mut().zip(indices) {
-        *o = epipolar_residual(data, f, affine_weight, i);
+        *o = epipolar_residual(data, f, affine_weight, confidence, i);
     }
 }
 
@@ -216,14 +236,29 @@ impl Problem for FundamentalProblem<'_> {
     }
 
     fn residuals(&self, f: &Mat3, start: usize, out: &mut [f64]) {
-        epipolar_residuals(self.data, f, self.affine_weight, start, out);
+        epipolar_residuals(
+            self.data,
+            f,
+            self.affine_weight,
+            self.confidence,
+            start,
+            out,
+        );
     }
 
     fn residuals_at(&self, f: &Mat3, indices: &[usize], out: &mut [f64]) {
-        epipolar_residuals_at(self.data, f, self.affine_weight, indices, out);
+        epipolar_residuals_at(
+            self.data,
+            f,
+            self.affine_weight,
+            self.confidence,
+            indices,
+            out,
+        );
     }
 
-    /// Levenberg–Marquardt on the rank-2 manifold of the Sampson error.
+    /// Levenberg–Marquardt on the rank-2 manifold of the Sampson error (plus, with
+    /// `options.affine`, the affine terms of [`epipolar_lm`]).
     fn refine(
         &self,
         model: &Mat3,
@@ -233,9 +268,24 @@ impl Problem for FundamentalProblem<'_> {
     ) -> Option<Mat3> {
         let (t1_inv, t2_inv) = (self.t1.try_inverse()?, self.t2.try_inverse()?);
         let start = RankTwo::new(&(t2_inv.transpose() * model * t1_inv))?;
-        let refined = levenberg_marquardt(self, &start, inliers, loss, options).0;
-        let f = self.to_pixels(&refined.matrix());
-        Some(f / f.norm())
+        let mut m = start;
+        let mut f = *model;
+        for _ in 0..epipolar_lm::AFFINE_ROUNDS {
+            let affine =
+                epipolar_lm::affine_terms(self.data, &f, inliers, self.confidence, options);
+            let lambda = affine.map(|t| t.lambda);
+            let fit = FundamentalFit {
+                problem: self,
+                affine,
+            };
+            m = levenberg_marquardt(&fit, &m, inliers, loss, options).0;
+            f = self.to_pixels(&m.matrix());
+            f /= f.norm();
+            if !epipolar_lm::rescale_again(self.data, &f, inliers, self.confidence, lambda) {
+                break;
+            }
+        }
+        Some(f)
     }
 }
 
@@ -308,9 +358,16 @@ fn hartley(x: &[Vec2]) -> Mat3 {
     Mat3::new(s, 0.0, -s * c.x, 0.0, s, -s * c.y, 0.0, 0.0, 1.0)
 }
 
+/// The least-squares problem of [`FundamentalProblem::refine`]: its data, with or without the
+/// affine terms.
+struct FundamentalFit<'p, 'a> {
+    problem: &'p FundamentalProblem<'a>,
+    affine: Option<epipolar_lm::AffineTerms<'a>>,
+}
+
 /// In the normalised frame (F̃, see [`FundamentalProblem`]): ∂F/∂a_k = U \[e_k\]× S Vᵀ, ∂F/∂b_k = −U S \[e_k\]× Vᵀ (U ← U exp(\[a\]×), V ← V exp(\[b\]×)),
 /// ∂F/∂σ = U diag(0, 1, 0) Vᵀ; the unit-norm rescaling of F does not change the Sampson error.
-impl LeastSquares for FundamentalProblem<'_> {
+impl LeastSquares for FundamentalFit<'_, '_> {
     type Model = RankTwo;
 
     fn dof(&self) -> usize {
@@ -318,7 +375,13 @@ impl LeastSquares for FundamentalProblem<'_> {
     }
 
     fn cost(&self, m: &RankTwo, indices: &[usize], loss: &Loss) -> f64 {
-        epipolar_lm::cost(self.data, &self.to_pixels(&m.f), indices, loss)
+        let f = self.problem.to_pixels(&m.f);
+        let data = self.problem.data;
+        epipolar_lm::cost(data, &f, indices, loss)
+            + self
+                .affine
+                .as_ref()
+                .map_or(0.0, |t| epipolar_lm::affine_cost(data, &f, indices, t))
     }
 
     fn normal_equations(
@@ -339,10 +402,15 @@ impl LeastSquares for FundamentalProblem<'_> {
                 3..=5 => -(u * s * skew(&e[k - 3]) * vt),
                 _ => u * Mat3::from_diagonal(&Vec3::new(0.0, 1.0, 0.0)) * vt,
             };
-            self.to_pixels(&(d * scale))
+            self.problem.to_pixels(&(d * scale))
         });
-        let f = self.to_pixels(&m.f);
-        epipolar_lm::normal_equations(self.data, &f, &basis, indices, loss, jtj, jtr)
+        let f = self.problem.to_pixels(&m.f);
+        let data = self.problem.data;
+        let mut cost = epipolar_lm::normal_equations(data, &f, &basis, indices, loss, jtj, jtr);
+        if let Some(t) = &self.affine {
+            cost += epipolar_lm::affine_normal_equations(data, &f, &basis, indices, t, jtj, jtr);
+        }
+        cost
     }
 
     fn retract(&self, m: &RankTwo, d: &Vec9) -> RankTwo {

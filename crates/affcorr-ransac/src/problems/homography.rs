@@ -24,6 +24,8 @@ pub struct HomographyProblem<'a> {
     data: &'a Correspondences,
     kind: SampleKind,
     affine_weight: f64,
+    /// Per-AC confidence in [0, 1] of the affine term of scoring.
+    confidence: Option<&'a [f64]>,
 }
 
 impl<'a> HomographyProblem<'a> {
@@ -34,7 +36,15 @@ impl<'a> HomographyProblem<'a> {
             data,
             kind,
             affine_weight,
+            confidence: None,
         }
+    }
+
+    /// Weighs each AC's affine term of scoring by `confidence` (one value in [0, 1] per datum,
+    /// checked by the estimators). The homography's refinements use points only.
+    pub fn with_affine_confidence(mut self, confidence: Option<&'a [f64]>) -> Self {
+        self.confidence = confidence;
+        self
     }
 }
 
@@ -42,7 +52,8 @@ impl HomographyProblem<'_> {
     /// Squared residual of datum `i` (see the module docs).
     #[inline(always)]
     fn residual(&self, h: &Mat3, i: usize) -> f64 {
-        self.residual_weighted(h, i, self.affine_weight)
+        let c = self.confidence.map_or(1.0, |c| c[i]);
+        self.residual_weighted(h, i, self.affine_weight * c)
     }
 
     /// Squared residual of datum `i` with affine weight `affine_weight`.

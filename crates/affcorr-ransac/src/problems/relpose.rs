@@ -48,6 +48,8 @@ pub struct RelativePoseProblem<'a> {
     k2: Intrinsics,
     kind: SampleKind,
     affine_weight: f64,
+    /// Per-AC confidence in [0, 1] of the affine terms (scoring and refinement).
+    confidence: Option<&'a [f64]>,
     /// Squared residual below which cheirality is checked.
     cheirality_cap_sq: f64,
 }
@@ -88,8 +90,16 @@ impl<'a> RelativePoseProblem<'a> {
             k2,
             kind,
             affine_weight,
+            confidence: None,
             cheirality_cap_sq: cheirality_threshold.powi(2),
         }
+    }
+
+    /// Weighs each AC's affine terms (in scoring and in the refinements) by `confidence` (one
+    /// value in [0, 1] per datum, checked by the estimators).
+    pub fn with_affine_confidence(mut self, confidence: Option<&'a [f64]>) -> Self {
+        self.confidence = confidence;
+        self
     }
 
     /// The model of a pose.
@@ -183,7 +193,14 @@ impl Problem for RelativePoseProblem<'_> {
     }
 
     fn residuals(&self, m: &PoseModel, start: usize, out: &mut [f64]) {
-        epipolar_residuals(self.pixels, &m.fundamental, self.affine_weight, start, out);
+        epipolar_residuals(
+            self.pixels,
+            &m.fundamental,
+            self.affine_weight,
+            self.confidence,
+            start,
+            out,
+        );
         for (k, o) in out.iter_mut().enumerate() {
             self.behind_is_outlier(m, start + k, o);
         }
@@ -194,6 +211,7 @@ impl Problem for RelativePoseProblem<'_> {
             self.pixels,
             &m.fundamental,
             self.affine_weight,
+            self.confidence,
             indices,
             out,
         );
@@ -202,7 +220,8 @@ impl Problem for RelativePoseProblem<'_> {
         }
     }
 
-    /// Levenberg–Marquardt on the manifold (R, t ∈ S²) of the pixel Sampson error.
+    /// Levenberg–Marquardt on the manifold (R, t ∈ S²) of the pixel Sampson error (plus, with
+    /// `options.affine`, the affine terms of [`epipolar_lm`]).
     fn refine(
         &self,
         model: &PoseModel,
@@ -210,7 +229,32 @@ impl Problem for RelativePoseProblem<'_> {
         loss: &Loss,
         options: &LmOptions,
     ) -> Option<PoseModel> {
-        Some(levenberg_marquardt(self, model, inliers, loss, options).0)
+        let mut m = *model;
+        for _ in 0..epipolar_lm::AFFINE_ROUNDS {
+            let affine = epipolar_lm::affine_terms(
+                self.pixels,
+                &m.fundamental,
+                inliers,
+                self.confidence,
+                options,
+            );
+            let lambda = affine.map(|t| t.lambda);
+            let fit = PoseFit {
+                problem: self,
+                affine,
+            };
+            m = levenberg_marquardt(&fit, &m, inliers, loss, options).0;
+            if !epipolar_lm::rescale_again(
+                self.pixels,
+                &m.fundamental,
+                inliers,
+                self.confidence,
+                lambda,
+            ) {
+                break;
+            }
+        }
+        Some(m)
     }
 }
 
@@ -225,9 +269,16 @@ fn tangent_basis(t: &Vec3) -> (Vec3, Vec3) {
     (b1, t.cross(&b1))
 }
 
+/// The least-squares problem of [`RelativePoseProblem::refine`]: its data, with or without the
+/// affine terms.
+struct PoseFit<'p, 'a> {
+    problem: &'p RelativePoseProblem<'a>,
+    affine: Option<epipolar_lm::AffineTerms<'a>>,
+}
+
 /// Pose refinement: R ← R·exp(\[ω\]×), t ← (t + α₁b₁ + α₂b₂)/‖·‖, θ = (ω, α), 5 degrees of
 /// freedom. ∂E/∂ω_k = \[t\]× R \[e_k\]×, ∂E/∂α_i = \[b_i\]× R, and ∂F = K2⁻ᵀ ∂E K1⁻¹.
-impl LeastSquares for RelativePoseProblem<'_> {
+impl LeastSquares for PoseFit<'_, '_> {
     type Model = PoseModel;
 
     fn dof(&self) -> usize {
@@ -235,7 +286,11 @@ impl LeastSquares for RelativePoseProblem<'_> {
     }
 
     fn cost(&self, m: &PoseModel, indices: &[usize], loss: &Loss) -> f64 {
-        epipolar_lm::cost(self.pixels, &m.fundamental, indices, loss)
+        let data = self.problem.pixels;
+        epipolar_lm::cost(data, &m.fundamental, indices, loss)
+            + self.affine.as_ref().map_or(0.0, |t| {
+                epipolar_lm::affine_cost(data, &m.fundamental, indices, t)
+            })
     }
 
     fn normal_equations(
@@ -248,7 +303,8 @@ impl LeastSquares for RelativePoseProblem<'_> {
     ) -> f64 {
         let (r, t) = (&m.pose.r, &m.pose.t);
         let (b1, b2) = tangent_basis(t);
-        let (k1i, k2it) = (self.k1.inverse(), self.k2.inverse().transpose());
+        let p = self.problem;
+        let (k1i, k2it) = (p.k1.inverse(), p.k2.inverse().transpose());
         let tx = skew(t);
         let de = [
             tx * r * skew(&Vec3::x()),
@@ -258,7 +314,12 @@ impl LeastSquares for RelativePoseProblem<'_> {
             skew(&b2) * r,
         ];
         let basis = de.map(|d| k2it * d * k1i);
-        epipolar_lm::normal_equations(self.pixels, &m.fundamental, &basis, indices, loss, jtj, jtr)
+        let f = &m.fundamental;
+        let mut cost = epipolar_lm::normal_equations(p.pixels, f, &basis, indices, loss, jtj, jtr);
+        if let Some(t) = &self.affine {
+            cost += epipolar_lm::affine_normal_equations(p.pixels, f, &basis, indices, t, jtj, jtr);
+        }
+        cost
     }
 
     fn retract(&self, m: &PoseModel, d: &Vec9) -> PoseModel {
@@ -271,7 +332,7 @@ impl LeastSquares for RelativePoseProblem<'_> {
         };
         let (b1, b2) = tangent_basis(&m.pose.t);
         let t = (m.pose.t + b1 * d[3] + b2 * d[4]).normalize();
-        self.model(Pose {
+        self.problem.model(Pose {
             r: m.pose.r * rot,
             t,
         })
@@ -313,7 +374,7 @@ mod tests {
         assert_eq!(r[1], f64::INFINITY);
         // The epipolar constraint alone accepts it.
         let mut sampson = [0.0; 2];
-        epipolar_residuals(&data, &model.fundamental, 0.0, 0, &mut sampson);
+        epipolar_residuals(&data, &model.fundamental, 0.0, None, 0, &mut sampson);
         assert!(sampson[1] < 1e-12, "{sampson:?}");
         // The SPRT's indexed form agrees.
         let mut at = [0.0; 2];
