@@ -60,6 +60,8 @@ def test_an_easy_pair_tries_no_synthetic_view():
         ({"views": "sometimes"}, "views: unknown mode"),
         ({"view_budget": -1.0}, "view_budget"),
         ({"max_views": 0}, "max_views"),
+        ({"view_relative_budget": 0.0}, "view_relative_budget"),
+        ({"view_relative_budget": float("nan")}, "view_relative_budget"),
     ],
 )
 def test_bad_view_options_are_named(kwargs, fragment):
@@ -73,9 +75,27 @@ def test_the_cli_takes_the_view_options(tmp_path):
     args = cli.build_parser().parse_args(["match", "a.png", "b.png", "-o", "x.npz"])
     assert args.views == affcorr.PIPELINE_DEFAULTS["views"] == "auto"
     assert args.view_budget is None
+    assert args.view_relative_budget == affcorr.PIPELINE_DEFAULTS["view_relative_budget"] == 30
+    none = ["match", "a.png", "b.png", "-o", "x.npz", "--view-relative-budget", "none"]
+    assert cli.build_parser().parse_args(none).view_relative_budget is None
     out = tmp_path / "h.json"
     code = cli.main(
         ["homography", str(GRAF / "graf1.png"), str(GRAF / "graf3.png"), "--views", "off",
          "--max-keypoints", "512", "-o", str(out)]
     )  # fmt: skip
     assert code == 0 and out.is_file()
+
+
+def test_the_relative_budget_stops_the_cascade_of_a_pair_no_view_solves():
+    # Graffiti against noise: nothing verifies. A budget of a millionth of the plain pass is
+    # spent by the plain pair's verification, so no synthetic view starts; with max_views=2
+    # and no relative budget, exactly two are tried.
+    a = affcorr.read_gray_image(GRAF / "graf1.png")
+    noise = np.random.default_rng(0).random((480, 640), dtype=np.float32)
+    tiny = affcorr.Pipeline(max_keypoints=512, threads=2, view_relative_budget=1e-6)
+    res = tiny.match_pair(a, noise)
+    assert [v["label"] for v in res.views] == ["plain"] and not res.views[0]["verified"]
+    two = affcorr.Pipeline(max_keypoints=512, threads=2, view_relative_budget=None, max_views=2)
+    res = two.match_pair(a, noise)
+    assert len(res.views) == 3 and not any(v["verified"] for v in res.views), res.views
+    assert all(v["window"] is None and v["other_scale"] == 1.0 for v in res.views)
