@@ -159,3 +159,21 @@ def test_bad_input_names_the_argument():
     img = np.zeros((40, 40), np.float32)
     with pytest.raises(ValueError, match="corrs"):
         affcorr.refine_affine(img, img, np.zeros((2, 7)))
+
+
+def test_pipeline_and_estimator_give_the_same_confidence():
+    """The Rust pipeline's scores equal the estimator's on the same matches (no downscaling,
+    no views): one computation behind both APIs."""
+    from affcorr.data import data_dir
+
+    d = data_dir() / "graffiti"
+    a, b = d / "graf1.png", d / "graf3.png"
+    kw = dict(max_keypoints=512, threads=2, views="off")
+    raw = affcorr.Pipeline("xfeat", refine_affine=False, **kw).match_pair(a, b)
+    res = affcorr.Pipeline("xfeat", **kw).match_pair(a, b)
+    est = affcorr.ShapeEstimator(threads=2)
+    for refine, r in ((False, raw), (True, res)):
+        e = est.estimate_detailed(a, b, raw.corrs[:, :2], raw.corrs[:, 2:4], refine=refine)
+        np.testing.assert_allclose(e.corrs, r.corrs, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(e.affine_confidence, r.affine_confidence, rtol=0, atol=1e-9)
+        np.testing.assert_array_equal(e.reliable, r.reliable)

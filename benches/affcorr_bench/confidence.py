@@ -511,7 +511,16 @@ def main(argv=None) -> None:
     ]
     out = Path(args.out)
     common.write_csv([dict(zip(cols, r)) for r in table], out.with_suffix(".csv"))
-    plot(results, out.with_suffix(".png"))
+    curves = dict(results)
+    if cache_file().exists():
+        # The calibration set's own curve (in-sample), from the cached features.
+        z = np.load(cache_file())
+        row = {k: z[k] for k in ("correct", "cos_network", "cos_refined")}
+        for key, model in (("network", "network"), ("refined", "network_refinement")):
+            w = affcorr.shape.confidence_model(model)[0]
+            row[f"conf_{key}"] = 1 / (1 + np.exp(-(z[f"feat_{key}"] @ w)))
+        curves = {"calibration set (held-out, in-sample)": [row], **results}
+    plot(curves, out.with_suffix(".png"))
     cal = json.loads(CALIBRATION_JSON.read_text()) if CALIBRATION_JSON.exists() else {}
     status = np.concatenate([r["status"] for r in both])
     names, counts = np.unique(status, return_counts=True)
