@@ -104,17 +104,16 @@ impl Matches {
             .or(self.views.first())
     }
 
-    /// Keeps only the reliable ACs (all per-AC fields alike).
+    /// Keeps only the reliable ACs (all per-AC fields alike; an AC without a flag is dropped).
     pub fn retain_reliable(&mut self) {
+        fn keep_flagged<T>(v: &mut Vec<T>, keep: &[bool]) {
+            let mut flags = keep.iter();
+            v.retain(|_| flags.next().copied().unwrap_or(false));
+        }
         let keep = std::mem::take(&mut self.reliable);
-        let mut k = keep.iter();
-        self.corrs.retain(|_| *k.next().expect("one flag per AC"));
-        let mut k = keep.iter();
-        self.certainty
-            .retain(|_| *k.next().expect("one flag per AC"));
-        let mut k = keep.iter();
-        self.affine_confidence
-            .retain(|_| *k.next().expect("one flag per AC"));
+        keep_flagged(&mut self.corrs, &keep);
+        keep_flagged(&mut self.certainty, &keep);
+        keep_flagged(&mut self.affine_confidence, &keep);
         self.reliable = vec![true; self.corrs.len()];
     }
 
@@ -136,4 +135,30 @@ pub struct Estimated<M> {
     pub matches: Matches,
     /// The robust estimate; `inliers` indexes `matches.corrs`.
     pub estimate: Estimate<M>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn retain_reliable_keeps_the_per_ac_fields_aligned() {
+        let row = |k: f64| [k, 0.0, k, 0.0, 1.0, 0.0, 0.0, 1.0];
+        let mut m = Matches {
+            corrs: vec![row(0.0), row(1.0), row(2.0)],
+            certainty: vec![0.9, 0.8, 0.7],
+            affine_confidence: vec![0.95, 0.2, 0.99],
+            reliable: vec![true, false, true],
+            ..Default::default()
+        };
+        m.retain_reliable();
+        assert_eq!(m.corrs, vec![row(0.0), row(2.0)]);
+        assert_eq!(m.certainty, vec![0.9, 0.7]);
+        assert_eq!(m.affine_confidence, vec![0.95, 0.99]);
+        assert_eq!(m.reliable, vec![true, true]);
+        // An AC without a flag is not kept (and nothing panics).
+        m.reliable.pop();
+        m.retain_reliable();
+        assert_eq!((m.corrs.len(), m.certainty.len()), (1, 1));
+    }
 }
