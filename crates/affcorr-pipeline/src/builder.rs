@@ -10,6 +10,7 @@ use affcorr_runner::{
 
 use crate::defaults;
 use crate::error::{PipelineError, Result};
+use crate::grow::GrowOptions;
 use crate::pipeline::Pipeline;
 use crate::views::ViewOptions;
 
@@ -53,6 +54,7 @@ pub struct PipelineBuilder {
     affine_refinement: Option<AffineRefineOptions>,
     drop_unreliable: bool,
     views: ViewOptions,
+    guided_matching: Option<GrowOptions>,
     seed: u64,
 }
 
@@ -74,6 +76,7 @@ impl Default for PipelineBuilder {
             affine_refinement: defaults::REFINE_AFFINE.then(AffineRefineOptions::default),
             drop_unreliable: false,
             views: ViewOptions::default(),
+            guided_matching: defaults::GUIDED_MATCHING.then(GrowOptions::default),
             seed: defaults::SEED,
         }
     }
@@ -195,6 +198,14 @@ impl PipelineBuilder {
         self
     }
 
+    /// Guided re-matching: more matches around the verified ones, predicted by their ACs and
+    /// fitted by the affine refinement (see [`crate::grow`]); `None` turns it off. Default:
+    /// [`defaults::GUIDED_MATCHING`]. Sparse matchers only.
+    pub fn guided_matching(mut self, options: Option<GrowOptions>) -> Self {
+        self.guided_matching = options;
+        self
+    }
+
     fn path(&self, explicit: &Option<PathBuf>, file: &str, what: &'static str) -> Result<PathBuf> {
         explicit
             .clone()
@@ -239,6 +250,9 @@ impl PipelineBuilder {
             ));
         }
         self.views.validate()?;
+        if let Some(g) = &self.guided_matching {
+            g.validate()?;
+        }
         let threads = affcorr_runner::resolve_threads(self.threads)?;
         let mut files = MatcherFiles::default();
         for &role in self.matcher.models() {
@@ -288,6 +302,7 @@ impl PipelineBuilder {
             affine_refinement: self.affine_refinement.clone(),
             drop_unreliable: self.drop_unreliable,
             views: self.views.clone(),
+            guided_matching: self.guided_matching.clone(),
             max_matches,
             max_side: self.max_side,
             threads,

@@ -75,6 +75,7 @@ pub mod builder;
 pub mod defaults;
 pub mod error;
 pub mod features;
+pub mod grow;
 pub mod pipeline;
 pub mod result;
 pub mod source;
@@ -87,6 +88,7 @@ pub use builder::{
 pub use defaults::Geometry;
 pub use error::{PipelineError, Result};
 pub use features::Features;
+pub use grow::{GrowOptions, Grown};
 pub use pipeline::{MAX_WORKING_PIXELS, Pipeline};
 pub use result::{Estimated, Matches, Timings};
 pub use source::ImageSource;

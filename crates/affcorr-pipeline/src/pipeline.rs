@@ -25,10 +25,12 @@ use affcorr_runner::{
 use crate::builder::PipelineBuilder;
 use crate::error::{PipelineError, Result};
 use crate::features::Features;
+use crate::grow::{GrowOptions, grow};
 use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
 use crate::views::{
-    ViewMode, ViewOptions, ViewReport, ViewSpec, candidate_views, guided_view, verify,
+    ViewMode, ViewOptions, ViewReport, ViewSpec, candidate_views, guided_view,
+    verified_fundamental, verify,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -84,6 +86,7 @@ pub struct Pipeline {
     pub(crate) affine_refinement: Option<AffineRefineOptions>,
     pub(crate) drop_unreliable: bool,
     pub(crate) views: ViewOptions,
+    pub(crate) guided_matching: Option<GrowOptions>,
     pub(crate) max_matches: Option<usize>,
     pub(crate) max_side: Option<usize>,
     pub(crate) threads: usize,
@@ -461,6 +464,15 @@ impl Pipeline {
             timings.views += t.elapsed();
             r
         };
+        let work = match &self.guided_matching {
+            Some(o) if !dense => {
+                let t = Instant::now();
+                let w = self.guided(work, work_a, work_b, &fa.matcher, o)?;
+                timings.guided += t.elapsed();
+                w
+            }
+            _ => work,
+        };
         let corrs = work
             .corrs
             .iter()
@@ -486,6 +498,50 @@ impl Pipeline {
             matches.retain_reliable();
         }
         Ok(matches)
+    }
+
+    /// Guided re-matching ([`crate::grow`]) of `work`: when its matches verify, the ACs grown
+    /// from the verified ones to the unmatched keypoints of image A (`features_a`) are
+    /// appended, with the certainty of the AC each grew from.
+    fn guided(
+        &self,
+        mut work: WorkMatches,
+        work_a: &GrayImage,
+        work_b: &GrayImage,
+        features_a: &ImageFeatures,
+        options: &GrowOptions,
+    ) -> Result<WorkMatches> {
+        let Some((f, mask)) = verified_fundamental(&work.corrs)? else {
+            return Ok(work);
+        };
+        let o = &self.views;
+        let inliers = mask.iter().filter(|m| **m).count();
+        if inliers < o.min_inliers || (inliers as f64) < o.min_inlier_ratio * mask.len() as f64 {
+            return Ok(work);
+        }
+        let index: Vec<usize> = (0..mask.len()).filter(|&i| mask[i]).collect();
+        let seeds: Vec<[f64; 8]> = index.iter().map(|&i| work.corrs[i]).collect();
+        let grown = grow(
+            work_a,
+            work_b,
+            &seeds,
+            &work.corrs,
+            features_a.keypoints(),
+            &f,
+            options,
+        )?;
+        tracing::debug!(
+            seeds = seeds.len(),
+            grown = grown.corrs.len(),
+            "guided re-matching"
+        );
+        for (k, row) in grown.corrs.iter().enumerate() {
+            work.corrs.push(*row);
+            work.certainty.push(work.certainty[index[grown.seed[k]]]);
+            work.affine_confidence.push(grown.affine_confidence[k]);
+            work.reliable.push(true);
+        }
+        Ok(work)
     }
 
     /// The features of a view of an image: extracted when the view warps it, else the plain

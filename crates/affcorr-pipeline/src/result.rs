@@ -31,6 +31,8 @@ pub struct Timings {
     /// ran, [`crate::PipelineBuilder::views`]); the views' own stages are counted in the stages
     /// above as well.
     pub views: Duration,
+    /// Guided re-matching (0 unless enabled, [`crate::PipelineBuilder::guided_matching`]).
+    pub guided: Duration,
     /// Robust estimation (0 for `match_pair`).
     pub ransac: Duration,
     /// The whole call.
@@ -39,7 +41,7 @@ pub struct Timings {
 
 impl Timings {
     /// (name, duration) of each stage in order, then `"total"`.
-    pub fn stages(&self) -> [(&'static str, Duration); 10] {
+    pub fn stages(&self) -> [(&'static str, Duration); 11] {
         [
             ("decode", self.decode),
             ("matcher", self.matcher),
@@ -49,6 +51,7 @@ impl Timings {
             ("shape_net", self.shape_net),
             ("affine_refine", self.affine_refine),
             ("views", self.views),
+            ("guided", self.guided),
             ("ransac", self.ransac),
             ("total", self.total),
         ]

@@ -33,6 +33,7 @@ use std::fmt;
 use std::str::FromStr;
 use std::time::Duration;
 
+use affcorr_geom::Mat3;
 use affcorr_image::AffineWarp;
 use affcorr_ransac::{Correspondences, EstimatorOptions, RansacError, estimate_fundamental};
 
@@ -400,16 +401,25 @@ pub fn guided_view(inlier_acs: &[[f64; 8]]) -> Option<ViewSpec> {
 /// The F-inliers of ACs (in any pixels) under the point and affine residual: 0 without a
 /// model; the inlier mask.
 pub(crate) fn verify(corrs: &[[f64; 8]]) -> Result<(usize, Vec<bool>)> {
+    Ok(match verified_fundamental(corrs)? {
+        Some((_, mask)) => (mask.iter().filter(|m| **m).count(), mask),
+        None => (0, vec![false; corrs.len()]),
+    })
+}
+
+/// The verifying fundamental matrix of ACs and its inlier mask ([`verify`]); `None` without a
+/// model.
+pub(crate) fn verified_fundamental(corrs: &[[f64; 8]]) -> Result<Option<(Mat3, Vec<bool>)>> {
     if corrs.len() < 8 {
-        return Ok((0, vec![false; corrs.len()]));
+        return Ok(None);
     }
     let data = Correspondences::from_ac_rows(corrs)?;
     let mut o = EstimatorOptions::default();
     o.ransac.threshold = VERIFY_THRESHOLD;
     o.affine_weight = VERIFY_AFFINE_WEIGHT;
     match estimate_fundamental(&data, &o) {
-        Ok(e) => Ok((e.num_inliers, e.inliers)),
-        Err(RansacError::NoModel { .. }) => Ok((0, vec![false; corrs.len()])),
+        Ok(e) => Ok(Some((e.model, e.inliers))),
+        Err(RansacError::NoModel { .. }) => Ok(None),
         Err(e) => Err(e.into()),
     }
 }
