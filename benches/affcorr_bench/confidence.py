@@ -4,7 +4,8 @@
     .venv/bin/python -m affcorr_bench.confidence               # evaluate
 
 Both runs match each pair with the pipeline's default matcher (XFeat + LighterGlue, refinement
-and views off, so that x1, x2 are the matcher's), then score the matches with
+and views off, so that x1, x2 are the matcher's; 1024 and 2048 keypoints per image: calibration
+pairs alternate, the evaluation runs both), then score the matches with
 ``ShapeEstimator.estimate_detailed`` twice: the network's ACs alone (``refine=False``) and the
 default output, network + affine Lucas-Kanade (``refine=True``). Ground truth A_gt = dx2/dx1 at
 x1; a match is *correct* when x2 is within 3 px of the true point. Measures (affcorr.metrics):
@@ -240,15 +241,18 @@ def score_pair(pipe, est, pair: GtPair) -> dict:
     return out
 
 
-def run_pairs(pairs: list[GtPair], max_keypoints: int) -> list[dict]:
-    pipe = affcorr.Pipeline(
-        "xfeat-lighterglue", max_keypoints=max_keypoints, refine_affine=False, views="off"
-    )
+def run_pairs(pairs: list[GtPair], max_keypoints: list[int]) -> list[dict]:
+    """Every pair scored; pair i matched with ``max_keypoints[i % len]`` keypoints (the
+    neighbour features depend on the matches' density)."""
+    pipes = [
+        affcorr.Pipeline("xfeat-lighterglue", max_keypoints=k, refine_affine=False, views="off")
+        for k in max_keypoints
+    ]
     est = affcorr.ShapeEstimator()
     rows = []
     for i, p in enumerate(pairs):
         t = time.time()
-        rows.append(score_pair(pipe, est, p))
+        rows.append(score_pair(pipes[i % len(pipes)], est, p))
         r = rows[-1]
         print(
             f"[{i + 1}/{len(pairs)}] {p.name}: {r['n']} matches, {int(r['correct'].sum())} "
@@ -452,7 +456,13 @@ def main(argv=None) -> None:
     )
     p.add_argument("--calibrate", action="store_true", help="fit the constants (held-out data)")
     p.add_argument("--refit", action="store_true", help="with --calibrate: the cached rows")
-    p.add_argument("--max-keypoints", type=int, default=1024)
+    p.add_argument(
+        "--max-keypoints",
+        type=int,
+        nargs="+",
+        default=[1024, 2048],
+        help="keypoints per image: calibration pairs cycle through them; evaluation runs each",
+    )
     p.add_argument("--max-side", type=int, default=512, help="calibration images' longer side")
     p.add_argument("--per-image", type=int, default=6, help="calibration warps per image")
     p.add_argument("--scenes", type=int, default=4, help="non-planar calibration scenes")
@@ -481,6 +491,7 @@ def main(argv=None) -> None:
             pairs=rows[0]["pair"] if args.refit else [r["pair"] for r in rows],
             correct=int(cat(rows, "correct").sum()),
             good_cos=GOOD_COS,
+            max_keypoints=args.max_keypoints,
             max_bad=args.max_bad,
             min_marginal=args.min_marginal,
             features=affcorr.shape.confidence_model("network")[2],
@@ -491,13 +502,15 @@ def main(argv=None) -> None:
         print(json.dumps(cal, indent=2))
         print(rust_constants(cal))
         return
-    sets = {"graffiti 1-3 (planar)": [graffiti()], "motorcycle (non-planar)": [motorcycle()]}
-    results = {k: run_pairs(v, args.max_keypoints) for k, v in sets.items()}
+    results = {}
+    for k in args.max_keypoints:
+        results[f"graffiti 1-3 (planar), {k} kp"] = run_pairs([graffiti()], [k])
+        results[f"motorcycle (non-planar), {k} kp"] = run_pairs([motorcycle()], [k])
     table = []
     for label, rows in results.items():
         table += summary(rows, label)
     both = [r for rows in results.values() for r in rows]
-    table += summary(both, "both")
+    table += summary(both, "all runs")
     cols = [
         "pair",
         "method",
@@ -530,7 +543,8 @@ def main(argv=None) -> None:
         f"Command: `{cmd}` (calibration: `{cal.get('command', '–')}`, "
         f"benches/results/confidence_calibration.json). Wall time {time.time() - t0:.0f} s.",
         "",
-        f"Matches: XFeat + LighterGlue, at most {args.max_keypoints} keypoints per image; a "
+        f"Matches: XFeat + LighterGlue, at most {' or '.join(map(str, args.max_keypoints))} "
+        "keypoints per image (kp; the pipeline's default is 2048); a "
         f"match is correct within {CORRECT_PX:.0f} px of the true x2. Fro = ||A - A_gt||_F, cos "
         "= cosine similarity of vec(A) and vec(A_gt), over the correct matches (where A_gt is "
         "known), and over those flagged `reliable`. 'share of correct': the share of the correct "

@@ -32,7 +32,8 @@
 //! The weights and thresholds were fitted by `benches/affcorr_bench/confidence.py --calibrate`
 //! (L2-regularised logistic regression) on held-out data only: the six validation images of
 //! the shape training (`affcorr.train.sources`, never trained on) under random plane-induced
-//! homographies (seeds distinct from the evaluation's), at XFeat + LighterGlue's matches; the
+//! homographies (seeds distinct from the evaluation's), at XFeat + LighterGlue's matches (1024
+//! and 2048 keypoints per image: the neighbour features depend on the density); the
 //! threshold is the least confidence at which, on that data, fewer than 0.6 % of the reliable
 //! ACs have cosine < 0.9, and at least 0.9 (an AC is reliable only when it is itself at least
 //! 90 % likely good); non-planar synthetic scenes of the same images (A_gt from depth) are in
@@ -127,26 +128,27 @@ mod calibration {
 
     // benches/results/confidence_calibration.json, written by
     // `.venv/bin/python -m affcorr_bench.confidence --calibrate --per-image 20 --scenes 30`
-    // (50 278 correct matches of 150 held-out pairs; AUC of "good": network 0.969, refinement
-    // 0.996, network + refinement 0.997).
+    // (82 349 correct matches of 150 held-out pairs at 1024 and 2048 keypoints;
+    // AUC of "good": network 0.965, refinement 0.996, network + refinement
+    // 0.996).
     pub const NETWORK: ([f64; FEATURES], f64) = (
         [
-            0.462799, 0.000000, 0.000000, 0.000000, 0.000000, -0.660117, 0.636671, -0.985987,
-            -1.544776,
+            0.531055, 0.000000, 0.000000, 0.000000, 0.000000, -0.600868, 0.681778, -0.777954,
+            -1.653646,
         ],
-        0.942085,
+        0.949870,
     );
     pub const REFINEMENT: ([f64; FEATURES], f64) = (
         [
-            -0.025038, 0.061955, 0.321193, -0.165555, -0.273756, 0.000000, 0.000000, -0.639514,
-            -0.599608,
+            0.057337, 0.058388, 0.299841, -0.160290, -0.261480, 0.000000, 0.000000, -0.618527,
+            -0.608045,
         ],
         0.900000,
     );
     pub const NETWORK_REFINEMENT: ([f64; FEATURES], f64) = (
         [
-            -0.483484, 0.064945, 0.319765, -0.183682, -0.294696, -0.311649, 0.060308, -0.594645,
-            -0.569806,
+            -0.358659, 0.059730, 0.296927, -0.175691, -0.277665, -0.284932, 0.069515, -0.582230,
+            -0.586563,
         ],
         0.900000,
     );
