@@ -23,6 +23,7 @@ use crate::image::gray_image;
 use crate::interrupt::interruptible;
 use crate::ransac::{mat_result, nan_mat3, nan_pose, outcome, parse_options, pose_result};
 use affcorr::pipeline::defaults::{self, Geometry};
+use affcorr::pipeline::GrowOptions;
 use affcorr::pipeline::views::ViewImage;
 use affcorr::pipeline::{
     AffineRefineOptions, Features, GrayImage, ImageSource, Matcher, Matches, Pipeline,
@@ -49,6 +50,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     d.set_item("refine_affine", defaults::REFINE_AFFINE)?;
     d.set_item("views", defaults::VIEWS.name())?;
     d.set_item("view_relative_budget", defaults::VIEW_RELATIVE_BUDGET)?;
+    d.set_item("guided_matching", defaults::GUIDED_MATCHING)?;
     d.set_item("seed", defaults::SEED)?;
     d.set_item("homography_threshold", defaults::HOMOGRAPHY_THRESHOLD)?;
     d.set_item("fundamental_threshold", defaults::FUNDAMENTAL_THRESHOLD)?;
@@ -219,6 +221,7 @@ impl PipelineRunner {
         lighterglue_model = None, dense_model = None, ort_library = None, max_keypoints = None,
         max_matches = None, max_side = None, threads = None, seed = None,
         refine_affine = defaults::REFINE_AFFINE, drop_unreliable = false,
+        guided_matching = defaults::GUIDED_MATCHING,
         views = None, view_budget = None,
         view_relative_budget = defaults::VIEW_RELATIVE_BUDGET, max_views = None
     ))]
@@ -239,6 +242,7 @@ impl PipelineRunner {
         seed: Option<&Bound<'_, PyAny>>,
         refine_affine: bool,
         drop_unreliable: bool,
+        guided_matching: bool,
         views: Option<&str>,
         view_budget: Option<f64>,
         view_relative_budget: Option<f64>,
@@ -296,6 +300,7 @@ impl PipelineRunner {
         }
         b = b.affine_refinement(refine_affine.then(AffineRefineOptions::default));
         b = b.drop_unreliable(drop_unreliable);
+        b = b.guided_matching(guided_matching.then(GrowOptions::default));
         let mut view_options = ViewOptions::default();
         if let Some(mode) = views {
             view_options.mode = mode.parse().map_err(|e| pipeline_error(e, None))?;

@@ -388,6 +388,7 @@ class PipelineRunner:
         seed: int | None = None,
         refine_affine: bool = ...,
         drop_unreliable: bool = False,
+        guided_matching: bool = ...,
         views: str | None = None,
         view_budget: float | None = None,
         view_relative_budget: float | None = ...,

@@ -108,6 +108,7 @@ def _pipeline(args):
         shape_model=args.shape_model,
         refine_affine=args.refine_affine,
         drop_unreliable=args.drop_unreliable,
+        guided_matching=args.guided_matching,
         views=args.views,
         view_budget=args.view_budget,
         view_relative_budget=args.view_relative_budget,
@@ -154,6 +155,13 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
         action="store_true",
         help="keep only the ACs whose A is flagged reliable (calibrated affine_confidence; "
         "docs/shape_network.md, 'Confidence')",
+    )
+    p.add_argument(
+        "--guided-matching",
+        action=argparse.BooleanOptionalAction,
+        default=PIPELINE_DEFAULTS["guided_matching"],
+        help="add matches around the verified ones, predicted by their ACs and fitted to the "
+        "images (default: %(default)s)",
     )
     p.add_argument(
         "--views",

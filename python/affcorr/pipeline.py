@@ -215,6 +215,11 @@ class Pipeline:
             ``affine_refine``); ``False`` gives the network's ACs alone.
         drop_unreliable: return only the ACs flagged reliable (:attr:`MatchResult.reliable`),
             for callers that need trustworthy A (default False: every AC, each flagged).
+        guided_matching: when the pair's matches verify, predict every unmatched keypoint of
+            image A in image B from its nearest verified AC (x2 + A (p - x1)), fit it by the
+            affine refinement and keep it when it is reliable and agrees with the verifying
+            fundamental matrix; the new ACs follow the matcher's (timed as ``guided``). More
+            matches where the images overlap, without descriptors (docs/pipeline.md).
 
     Every model's ONNX contract is checked on loading.
 
@@ -241,6 +246,7 @@ class Pipeline:
         seed: int = _D["seed"],
         refine_affine: bool = _D["refine_affine"],
         drop_unreliable: bool = False,
+        guided_matching: bool = _D["guided_matching"],
         views: str = _D["views"],
         view_budget: float | None = None,
         view_relative_budget: float | None = PIPELINE_DEFAULTS["view_relative_budget"],
@@ -295,6 +301,7 @@ class Pipeline:
             seed=int(seed),
             refine_affine=bool(refine_affine),
             drop_unreliable=bool(drop_unreliable),
+            guided_matching=bool(guided_matching),
             views=views,
             view_budget=view_budget,
             view_relative_budget=view_relative_budget,
