@@ -10,7 +10,8 @@
   them), ``ac_keypoints`` (N, 2) (each AC's keypoint in image 0 and 1, -1 for none), and the
   models with their inlier masks over the ACs (``H``, ``H_inliers``, ``F``, ``F_inliers``,
   ``R``, ``t``, ``E``, ``pose_inliers``); attributes ``checksum`` (of the inputs and options,
-  for ``resume``), ``worker``, ``seconds``, ``view``.
+  for ``resume``), ``worker``, ``seconds``, ``view``, ``peak_rss_mb`` (the worker's peak
+  memory so far).
 - ``failures.jsonl``: one line per failed pair (names, error), appended.
 - ``database.db`` (optional, pycolmap): cameras, images, keypoints (+0.5: COLMAP's pixel
   corners), matches and verified two-view geometries (F, E or H with their inlier matches).
@@ -130,6 +131,7 @@ class HdfWriter:
                 g.attrs["worker"] = r["worker"]
                 g.attrs["seconds"] = r["seconds"]
                 g.attrs["view"] = r.get("view", "")
+                g.attrs["peak_rss_mb"] = r.get("peak_rss_mb", 0.0)
 
 
 class FailureLog:

@@ -79,18 +79,19 @@ def _model_digests(models: dict[str, Path]) -> dict[str, str]:
 
 
 class _Progress:
-    """tqdm with pairs/s and failures when installed (to stderr), else a line per 10%."""
+    """tqdm with pairs/s and failures on a terminal (stderr), else a line per 10%."""
 
     def __init__(self, total: int, enabled: bool) -> None:
         self.total, self.n, self.failed = total, 0, 0
         self.enabled = enabled
         self.bar = None
         self.next_line = 0
-        if enabled:
+        self.start = time.perf_counter()
+        if enabled and sys.stderr.isatty():
             try:
                 from tqdm import tqdm
 
-                self.bar = tqdm(total=total, desc="affcorr batch", unit="pair", disable=None)
+                self.bar = tqdm(total=total, desc="affcorr batch", unit="pair")
             except ImportError:
                 pass
 
@@ -101,8 +102,10 @@ class _Progress:
             self.bar.set_postfix(failed=self.failed, refresh=False)
             self.bar.update(done)
         elif self.enabled and (self.n >= self.next_line or self.n == self.total):
+            rate = self.n / max(time.perf_counter() - self.start, 1e-9)
             print(
-                f"affcorr batch: {self.n}/{self.total} pairs, {self.failed} failed",
+                f"affcorr batch: {self.n}/{self.total} pairs, {rate:.2f} pairs/s, "
+                f"{self.failed} failed",
                 file=sys.stderr,
                 flush=True,
             )

@@ -10,6 +10,7 @@ the object store, fetched once per worker process and written to a private folde
 from __future__ import annotations
 
 import os
+import resource
 import tempfile
 import time
 from collections import OrderedDict
@@ -125,6 +126,8 @@ class _State:
             rec = {k: rec[k] for k in ("index", "name0", "name1", "checksum", "worker")}
             rec["error"] = f"{type(e).__name__}: {e}"
         rec["seconds"] = time.perf_counter() - t0
+        # The worker's peak resident memory so far (MB; Linux reports kB).
+        rec["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         return rec
 
 
