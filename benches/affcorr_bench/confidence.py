@@ -558,7 +558,7 @@ def main(argv=None) -> None:
         "",
         *common.md_table(cols, table),
         "",
-        "Refinement outcome at all matches of both pairs: "
+        "Refinement outcome at all matches of all runs: "
         + ", ".join(f"{n} {c}" for n, c in zip(names, counts))
         + ".",
         "",
