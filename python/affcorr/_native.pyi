@@ -364,6 +364,7 @@ class PipelineFeatures:
     def __reduce__(self) -> tuple[Any, tuple[bytes]]: ...
     def __len__(self) -> int: ...
 
+@final
 class PipelineRunner:
     """Matcher (XFeat backbone + MNN / XFeat* refinement / LighterGlue, or a dense-warp-v1
     model with DKM's balanced sampling) and shape network in Rust (use ``affcorr.Pipeline``).
