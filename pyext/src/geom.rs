@@ -55,7 +55,7 @@ fn synthesize_affine<'py>(
     let r = F64Array::extract(residual_shape, "residual_shape")?.expect(&[N, Dim::Is(3)])?;
     let (o, s, r) = (o.as_slice(), s.as_slice(), r.rows::<3>());
     let mut out = vec![[0.0; 4]; o.len()];
-    crate::interrupt::parallel(py, || affine::synthesize_affine(o, s, r, &mut out))
+    crate::interrupt::parallel(py, o.len(), || affine::synthesize_affine(o, s, r, &mut out))
         .map_err(value_error)?;
     to_numpy(py, &[out.len(), 2, 2], flatten(out))
 }
@@ -75,7 +75,7 @@ fn decompose_affine<'py>(
         residual_shape: [0.0; 3],
     };
     let mut out = vec![blank; a.len()];
-    crate::interrupt::parallel(py, || affine::decompose_affine(a, &mut out))
+    crate::interrupt::parallel(py, a.len(), || affine::decompose_affine(a, &mut out))
         .map_err(value_error)?;
     let n = out.len();
     Ok((
@@ -101,8 +101,10 @@ fn affine_from_homography<'py>(
     let x1 = F64Array::extract(x1, "x1")?.expect(&[N, Dim::Is(2)])?;
     let x1 = x1.rows::<2>();
     let mut out = vec![[0.0; 4]; x1.len()];
-    crate::interrupt::parallel(py, || homography::affine_from_homography(&h, x1, &mut out))
-        .map_err(value_error)?;
+    crate::interrupt::parallel(py, x1.len(), || {
+        homography::affine_from_homography(&h, x1, &mut out)
+    })
+    .map_err(value_error)?;
     to_numpy(py, &[out.len(), 2, 2], flatten(out))
 }
 
@@ -117,7 +119,7 @@ fn correspondences_from_homography<'py>(
     let x1 = F64Array::extract(x1, "x1")?.expect(&[N, Dim::Is(2)])?;
     let x1 = x1.rows::<2>();
     let mut out = vec![[0.0; 8]; x1.len()];
-    crate::interrupt::parallel(py, || {
+    crate::interrupt::parallel(py, x1.len(), || {
         homography::correspondences_from_homography(&h, x1, &mut out)
     })
     .map_err(value_error)?;
@@ -137,7 +139,7 @@ fn normalize_correspondences<'py>(
     let (k1, k2) = (intrinsics(K1, "K1")?, intrinsics(K2, "K2")?);
     let rows = c.rows::<8>();
     let mut out = vec![[0.0; 8]; rows.len()];
-    crate::interrupt::parallel(py, || {
+    crate::interrupt::parallel(py, rows.len(), || {
         camera::normalize_correspondences(rows, &k1, &k2, &mut out)
     })
     .map_err(value_error)?;
@@ -167,7 +169,7 @@ fn laf_to_affine<'py>(
     shape.push(8);
     let (r1, r2) = (l1.rows::<6>(), l2.rows::<6>());
     let mut out = vec![[0.0; 8]; r1.len()];
-    crate::interrupt::parallel(py, || affine::laf_to_affine(r1, r2, &mut out))
+    crate::interrupt::parallel(py, r1.len(), || affine::laf_to_affine(r1, r2, &mut out))
         .map_err(value_error)?;
     to_numpy(py, &shape, flatten(out))
 }
@@ -190,8 +192,10 @@ fn affine_to_laf<'py>(
     let rows = c.rows::<8>();
     let n = rows.len();
     let (mut l1, mut l2) = (vec![[0.0; 6]; n], vec![[0.0; 6]; n]);
-    crate::interrupt::parallel(py, || affine::affine_to_laf(rows, radius, &mut l1, &mut l2))
-        .map_err(value_error)?;
+    crate::interrupt::parallel(py, n, || {
+        affine::affine_to_laf(rows, radius, &mut l1, &mut l2)
+    })
+    .map_err(value_error)?;
     Ok((
         to_numpy(py, &[1, n, 2, 3], flatten(l1))?,
         to_numpy(py, &[1, n, 2, 3], flatten(l2))?,

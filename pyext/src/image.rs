@@ -184,12 +184,13 @@ fn extract_patches<'py>(
 ) -> PyResult<F32<'py>> {
     let xy = points(xy, "xy")?;
     let img = gray_image(py, image, "image")?;
-    let p = crate::interrupt::parallel(py, || extract(&img, &xy)).map_err(|e| match e {
-        ImageError::NonFinite { row, .. } => {
-            PyValueError::new_err(format!("xy[{row}] contains NaN or infinity"))
-        }
-        e => image_error(e, Some("xy")),
-    })?;
+    let p =
+        crate::interrupt::parallel(py, usize::MAX, || extract(&img, &xy)).map_err(|e| match e {
+            ImageError::NonFinite { row, .. } => {
+                PyValueError::new_err(format!("xy[{row}] contains NaN or infinity"))
+            }
+            e => image_error(e, Some("xy")),
+        })?;
     let n = p.len();
     f32_array(py, &[n, 1, 32, 32], p.into_vec())
 }

@@ -53,9 +53,15 @@ pub fn pool() -> Arc<ThreadPool> {
     pool
 }
 
-/// Runs `f` on [`pool`] with the GIL released: for short calls, which need fork safety but
-/// not interruption.
-pub fn parallel<T: Send>(py: Python<'_>, f: impl FnOnce() -> T + Send) -> T {
+/// Runs `f` over `rows` rows with the GIL released: for short calls, which need fork safety
+/// but not interruption. Below `affcorr::geom::batch::PARALLEL_MIN_LEN` rows the batched
+/// kernels run on the calling thread without rayon, so `f` runs right here (handing it to
+/// [`pool`] would cost two thread wake-ups, tens of µs, more than the work); above, on
+/// [`pool`]. `f` must use rayon only through those kernels (or pass `usize::MAX`).
+pub fn parallel<T: Send>(py: Python<'_>, rows: usize, f: impl FnOnce() -> T + Send) -> T {
+    if rows < affcorr::geom::batch::PARALLEL_MIN_LEN {
+        return py.detach(f);
+    }
     let pool = pool();
     py.detach(|| pool.install(f))
 }

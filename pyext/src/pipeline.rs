@@ -22,8 +22,8 @@ use crate::errors::{image_error, pipeline_error, runner_error};
 use crate::image::gray_image;
 use crate::interrupt::interruptible;
 use crate::ransac::{mat_result, nan_mat3, nan_pose, outcome, parse_options, pose_result};
-use affcorr::pipeline::defaults::{self, Geometry};
 use affcorr::pipeline::GrowOptions;
+use affcorr::pipeline::defaults::{self, Geometry};
 use affcorr::pipeline::views::ViewImage;
 use affcorr::pipeline::{
     AffineRefineOptions, Features, GrayImage, ImageSource, Matcher, Matches, Pipeline,
@@ -730,7 +730,7 @@ impl PipelineFeatures {
     fn descriptors<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let d = self.inner.descriptor_dim();
         let v = self.inner.descriptors().to_vec();
-        let n = if d == 0 { 0 } else { v.len() / d };
+        let n = v.len().checked_div(d).unwrap_or(0);
         Ok(crate::image::f32_array(py, &[n, d], v)?.into_any())
     }
 

@@ -74,10 +74,10 @@ fn sampson_point<'py>(
     let mut out = vec![0.0; n];
     let result = if c.shape()[1] == 4 {
         let rows = c.rows::<4>();
-        crate::interrupt::parallel(py, || sampson::sampson_point_batch(f, rows, &mut out))
+        crate::interrupt::parallel(py, n, || sampson::sampson_point_batch(f, rows, &mut out))
     } else {
         let rows = c.rows::<8>();
-        crate::interrupt::parallel(py, || sampson::sampson_point_batch(f, rows, &mut out))
+        crate::interrupt::parallel(py, n, || sampson::sampson_point_batch(f, rows, &mut out))
     };
     result.map_err(value_error)?;
     to_numpy(py, &[n], out)
@@ -96,8 +96,10 @@ fn sampson_affine<'py>(
     let (f, rows) = (f.get(), c.rows::<8>());
     let mut out = vec![0.0; 2 * rows.len()];
     let out_rows = out.as_chunks_mut::<2>().0;
-    crate::interrupt::parallel(py, || sampson::sampson_affine_batch(f, rows, out_rows))
-        .map_err(value_error)?;
+    crate::interrupt::parallel(py, rows.len(), || {
+        sampson::sampson_affine_batch(f, rows, out_rows)
+    })
+    .map_err(value_error)?;
     to_numpy(py, &[rows.len(), 2], out)
 }
 
@@ -119,13 +121,13 @@ fn sampson_point_grad<'py>(
     let d_f_rows = d_f.as_chunks_mut::<9>().0;
     let result = if width == 4 {
         let (rows, d_rows) = (c.rows::<4>(), d_corrs.as_chunks_mut::<4>().0);
-        crate::interrupt::parallel(py, || {
+        crate::interrupt::parallel(py, n, || {
             sampson::sampson_point_grad_columns(f, rows, &mut value, d_rows, d_f_rows)
         })
     } else {
         // The A columns of the gradient stay zero: SD_P does not depend on them.
         let (rows, d_rows) = (c.rows::<8>(), d_corrs.as_chunks_mut::<8>().0);
-        crate::interrupt::parallel(py, || {
+        crate::interrupt::parallel(py, n, || {
             sampson::sampson_point_grad_columns(f, rows, &mut value, d_rows, d_f_rows)
         })
     };
@@ -154,7 +156,7 @@ fn sampson_affine_grad<'py>(
     let value_rows = value.as_chunks_mut::<2>().0;
     let d_rows = d_corrs.as_chunks_mut::<8>().0.as_chunks_mut::<2>().0;
     let d_f_rows = d_f.as_chunks_mut::<9>().0.as_chunks_mut::<2>().0;
-    crate::interrupt::parallel(py, || {
+    crate::interrupt::parallel(py, n, || {
         sampson::sampson_affine_grad_columns(f, rows, value_rows, d_rows, d_f_rows)
     })
     .map_err(value_error)?;
