@@ -336,57 +336,101 @@ pub fn neighbour_agreement(corrs: &[[f64; 8]]) -> Vec<(f64, f64)> {
 }
 
 /// The indices of the (at most) `k` nearest other points of each point, nearest first (ties by
-/// index): a sweep over the points sorted by x that stops once |Δx| exceeds the k-th distance.
+/// index); a point with a non-finite coordinate has none and is nobody's neighbour.
+///
+/// A uniform grid of about `k` points per cell, searched in square rings of cells around the
+/// query until the k-th distance found is within the next ring's reach: O(N k) for spread-out
+/// points (10 000 ACs in a few milliseconds).
 pub fn nearest_neighbours(points: &[[f64; 2]], k: usize) -> Vec<Vec<usize>> {
     let n = points.len();
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&i, &j| points[i][0].total_cmp(&points[j][0]).then(i.cmp(&j)));
-    let mut rank = vec![0usize; n];
-    for (r, &i) in order.iter().enumerate() {
-        rank[i] = r;
+    let finite: Vec<usize> = (0..n)
+        .filter(|&i| points[i].iter().all(|v| v.is_finite()))
+        .collect();
+    if k == 0 || finite.len() < 2 {
+        return vec![Vec::new(); n];
+    }
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for &i in &finite {
+        for d in 0..2 {
+            lo[d] = lo[d].min(points[i][d]);
+            hi[d] = hi[d].max(points[i][d]);
+        }
+    }
+    let (w, h) = (hi[0] - lo[0], hi[1] - lo[1]);
+    // About k points per cell, at most 1024 cells a side.
+    let cell = ((w.max(1e-9) * h.max(1e-9) * k as f64 / finite.len() as f64).sqrt())
+        .max(w.max(h) / 1024.0)
+        .max(1e-9);
+    let (gx, gy) = ((w / cell) as usize + 1, (h / cell) as usize + 1);
+    let cell_of = |p: &[f64; 2]| {
+        let cx = (((p[0] - lo[0]) / cell) as usize).min(gx - 1);
+        let cy = (((p[1] - lo[1]) / cell) as usize).min(gy - 1);
+        (cx, cy)
+    };
+    // Counting sort of the finite points by cell.
+    let mut start = vec![0usize; gx * gy + 1];
+    for &i in &finite {
+        let (cx, cy) = cell_of(&points[i]);
+        start[cy * gx + cx + 1] += 1;
+    }
+    for c in 0..gx * gy {
+        start[c + 1] += start[c];
+    }
+    let mut fill = start.clone();
+    let mut members = vec![0usize; finite.len()];
+    for &i in &finite {
+        let (cx, cy) = cell_of(&points[i]);
+        let c = cy * gx + cx;
+        members[fill[c]] = i;
+        fill[c] += 1;
     }
     (0..n)
         .into_par_iter()
         .map(|i| {
             let p = points[i];
+            if !p.iter().all(|v| v.is_finite()) {
+                return Vec::new();
+            }
+            let (cx, cy) = cell_of(&p);
             // (squared distance, index), sorted, at most k.
             let mut best: Vec<(f64, usize)> = Vec::with_capacity(k + 1);
-            let consider = |j: usize, best: &mut Vec<(f64, usize)>| {
-                let q = points[j];
-                let d = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
-                if !d.is_finite() {
-                    return;
-                }
-                if best.len() < k || (d, j) < *best.last().expect("k > 0 when full") {
-                    let at = best.partition_point(|e| *e < (d, j));
-                    best.insert(at, (d, j));
-                    best.truncate(k);
+            let mut visit = |x: usize, y: usize, best: &mut Vec<(f64, usize)>| {
+                let c = y * gx + x;
+                for &j in &members[start[c]..start[c + 1]] {
+                    if j == i {
+                        continue;
+                    }
+                    let q = points[j];
+                    let d = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+                    if best.len() < k || (d, j) < *best.last().expect("k > 0 when full") {
+                        let at = best.partition_point(|e| *e < (d, j));
+                        best.insert(at, (d, j));
+                        best.truncate(k);
+                    }
                 }
             };
-            let r = rank[i];
-            let (mut lo, mut hi) = (r, r + 1);
-            let (mut go_lo, mut go_hi) = (true, true);
-            while k > 0 && (go_lo || go_hi) {
-                let bound = if best.len() < k {
-                    f64::INFINITY
-                } else {
-                    best.last().expect("full").0
-                };
-                if go_hi {
-                    if hi < n && (points[order[hi]][0] - p[0]).powi(2) <= bound {
-                        consider(order[hi], &mut best);
-                        hi += 1;
+            for r in 0..gx.max(gy) {
+                let (x0, x1) = (cx.saturating_sub(r), (cx + r).min(gx - 1));
+                let (y0, y1) = (cy.saturating_sub(r), (cy + r).min(gy - 1));
+                for y in y0..=y1 {
+                    // The ring: whole rows at its top and bottom, the two side cells between.
+                    if y == cy.wrapping_sub(r) || y == cy + r {
+                        for x in x0..=x1 {
+                            visit(x, y, &mut best);
+                        }
                     } else {
-                        go_hi = false;
+                        if cx >= r {
+                            visit(cx - r, y, &mut best);
+                        }
+                        if r > 0 && cx + r < gx {
+                            visit(cx + r, y, &mut best);
+                        }
                     }
                 }
-                if go_lo {
-                    if lo > 0 && (points[order[lo - 1]][0] - p[0]).powi(2) <= bound {
-                        lo -= 1;
-                        consider(order[lo], &mut best);
-                    } else {
-                        go_lo = false;
-                    }
+                // Every point of ring r + 1 or beyond is at least r cells away.
+                let reach = r as f64 * cell;
+                if best.len() == k && best.last().expect("full").0 <= reach * reach {
+                    break;
                 }
             }
             best.into_iter().map(|(_, j)| j).collect()
@@ -407,10 +451,12 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             (s >> 11) as f64 / (1u64 << 53) as f64
         };
-        let pts: Vec<[f64; 2]> = (0..300)
+        let pts: Vec<[f64; 2]> = (0..400)
             .map(|i| {
                 if i % 50 == 0 {
                     [10.0, 10.0] // duplicates
+                } else if i % 3 == 0 {
+                    [70.0 + 0.01 * next(), 5.0 + 0.01 * next()] // a tight cluster
                 } else {
                     [100.0 * next(), 60.0 * next()]
                 }
@@ -436,6 +482,9 @@ mod tests {
             vec![Vec::<usize>::new()]
         );
         assert!(nearest_neighbours(&[], 8).is_empty());
+        // Non-finite points have no neighbours and are nobody's; a line of points works.
+        let knn = nearest_neighbours(&[[0.0, 0.0], [f64::NAN, 1.0], [2.0, 0.0], [5.0, 0.0]], 8);
+        assert_eq!(knn, vec![vec![2, 3], vec![], vec![0, 3], vec![2, 0]]);
     }
 
     #[test]
