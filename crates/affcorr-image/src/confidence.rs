@@ -394,7 +394,7 @@ pub fn nearest_neighbours(points: &[[f64; 2]], k: usize) -> Vec<Vec<usize>> {
             let (cx, cy) = cell_of(&p);
             // (squared distance, index), sorted, at most k.
             let mut best: Vec<(f64, usize)> = Vec::with_capacity(k + 1);
-            let mut visit = |x: usize, y: usize, best: &mut Vec<(f64, usize)>| {
+            let visit = |x: usize, y: usize, best: &mut Vec<(f64, usize)>| {
                 let c = y * gx + x;
                 for &j in &members[start[c]..start[c + 1]] {
                     if j == i {
