@@ -249,11 +249,14 @@ pub struct ShapePrediction {
 impl ShapePrediction {
     /// The network's uncertainty about each pair, both patches together, as the confidence
     /// takes it ([`affcorr_image::confidence`]): angle Σ (1 − R), scale √(σ_a² + σ_b²).
+    /// A pair without spreads (a prediction not made by [`ShapeModel::decode`]) gets NaN,
+    /// which the confidence takes as the widest spread.
     pub fn spread(&self) -> Vec<affcorr_image::NetworkSpread> {
+        let at = |v: &[f64], i: usize| v.get(i).copied().unwrap_or(f64::NAN);
         (0..self.len())
             .map(|i| affcorr_image::NetworkSpread {
-                angle: self.angle_spread_a[i] + self.angle_spread_b[i],
-                scale: self.scale_spread_a[i].hypot(self.scale_spread_b[i]),
+                angle: at(&self.angle_spread_a, i) + at(&self.angle_spread_b, i),
+                scale: at(&self.scale_spread_a, i).hypot(at(&self.scale_spread_b, i)),
             })
             .collect()
     }
