@@ -66,12 +66,14 @@ def cluster():
                 if time.monotonic() > deadline or nodes[0].poll() is not None:
                     pytest.fail("the Ray head did not start")
                 time.sleep(0.5)
-        nodes += [_node(f"--address={address}", "--num-cpus=1") for _ in range(2)]
         ray.init(address=address, log_to_driver=False)
-        while ray.cluster_resources().get("CPU", 0) < 2:
-            if time.monotonic() > deadline:
-                pytest.fail(f"the Ray worker nodes did not join: {ray.cluster_resources()}")
-            time.sleep(0.5)
+        # One node at a time: two raylets starting together can pick the same free port.
+        for cpus in (1, 2):
+            nodes.append(_node(f"--address={address}", "--num-cpus=1"))
+            while ray.cluster_resources().get("CPU", 0) < cpus:
+                if time.monotonic() > deadline or nodes[-1].poll() is not None:
+                    pytest.fail(f"a Ray worker node did not join: {ray.cluster_resources()}")
+                time.sleep(0.5)
         yield address
     finally:
         if ray.is_initialized():
