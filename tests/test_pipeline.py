@@ -145,6 +145,7 @@ def test_match_result_layout_and_certainty(data):
         "shape_net",
         "affine_refine",
         "views",
+        "guided",
         "ransac",
         "total",
     }

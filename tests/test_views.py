@@ -75,7 +75,7 @@ def test_the_cli_takes_the_view_options(tmp_path):
     args = cli.build_parser().parse_args(["match", "a.png", "b.png", "-o", "x.npz"])
     assert args.views == affcorr.PIPELINE_DEFAULTS["views"] == "auto"
     assert args.view_budget is None
-    assert args.view_relative_budget == affcorr.PIPELINE_DEFAULTS["view_relative_budget"] == 30
+    assert args.view_relative_budget == affcorr.PIPELINE_DEFAULTS["view_relative_budget"] == 40
     none = ["match", "a.png", "b.png", "-o", "x.npz", "--view-relative-budget", "none"]
     assert cli.build_parser().parse_args(none).view_relative_budget is None
     out = tmp_path / "h.json"

@@ -115,7 +115,8 @@ class MatchResult:
         timings: seconds per stage: ``decode``, ``matcher``, ``detection``, ``matching``,
             ``patches``, ``shape_net``, ``affine_refine`` (0 unless enabled), ``views`` (the
             view cascade: verification and synthetic views, whose own stages are counted in
-            the stages above too), ``ransac`` (0 unless estimated), ``total``.
+            the stages above too), ``guided`` (guided re-matching, 0 unless enabled),
+            ``ransac`` (0 unless estimated), ``total``.
         num_keypoints: keypoints (or semi-dense cells) found in image A and in image B.
         affine_confidence: ``(N,)`` float64 in [0, 1], the calibrated probability that each
             AC's A is good (cosine with the true A >= 0.9), from the shape network's spread,

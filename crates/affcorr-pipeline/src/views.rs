@@ -329,30 +329,27 @@ pub fn candidate_views() -> Vec<ViewSpec> {
     v.extend([zoom(A, 0.5), zoom(B, 0.5)]);
     v.extend([45.0, 315.0, 135.0, 225.0].map(rotation));
     v.extend([zoom(A, 0.25), zoom(B, 0.25)]);
+    let tilts = |image, t: f64, n: usize| {
+        (0..n).map(move |k| ViewSpec::param(image, 0.0, 1.0, t, 180.0 * k as f64 / n as f64))
+    };
     // Strong zooms (4–8×): the zoomed image's content is a small part of the other, where
     // the other's keypoint budget barely lands. Half-size tiles of that image, magnified by 2
     // and overlapping by half (so that any part up to a quarter of the image's side lies
     // inside one), meet the zoomed image shrunk by ½.
-    for image in [B, A] {
-        for y0 in [0.25, 0.0, 0.5] {
-            for x0 in [0.25, 0.0, 0.5] {
-                v.push(ViewSpec::tile(image, 2.0, x0, y0, 0.5, 0.5));
-            }
-        }
-    }
-    for (t, n) in [(2.0, 4), (4.0, 8)] {
-        for image in [A, B] {
-            for k in 0..n {
-                v.push(ViewSpec::param(
-                    image,
-                    0.0,
-                    1.0,
-                    t,
-                    180.0 * k as f64 / n as f64,
-                ));
-            }
-        }
-    }
+    let tiles = |image| {
+        [0.25, 0.0, 0.5].into_iter().flat_map(move |y0| {
+            [0.25, 0.0, 0.5]
+                .into_iter()
+                .map(move |x0| ViewSpec::tile(image, 2.0, x0, y0, 0.5, 0.5))
+        })
+    };
+    // Tilts before tiles image by image: a steep tilt is the commoner hard case, and a tilt
+    // view extracts one image where a tile view extracts both.
+    v.extend(tilts(A, 2.0, 4).chain(tilts(B, 2.0, 4)));
+    v.extend(tilts(A, 4.0, 8));
+    v.extend(tiles(B));
+    v.extend(tilts(B, 4.0, 8));
+    v.extend(tiles(A));
     // Steep tilts of a rotated pair: the matcher needs both undone at once.
     for r in [90.0, 270.0, 180.0] {
         for k in 0..8 {
@@ -416,7 +413,7 @@ pub(crate) fn verified_fundamental(corrs: &[[f64; 8]]) -> Result<Option<(Mat3, V
     let data = Correspondences::from_ac_rows(corrs)?;
     let mut o = EstimatorOptions::default();
     o.ransac.threshold = VERIFY_THRESHOLD;
-    o.affine_weight = VERIFY_AFFINE_WEIGHT;
+    o.affine_weight = Some(VERIFY_AFFINE_WEIGHT);
     match estimate_fundamental(&data, &o) {
         Ok(e) => Ok(Some((e.model, e.inliers))),
         Err(RansacError::NoModel { .. }) => Ok(None),
