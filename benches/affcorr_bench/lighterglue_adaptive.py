@@ -4,15 +4,16 @@ quantisation).
 
     .venv/bin/python -m affcorr_bench.lighterglue_adaptive [--top-k 1024 2048] [--repeats 3]
 
-Pairs: graffiti 1→3 (800×640, its published H) and the three viewpoint sequences of the
-evaluation suite (affcorr_bench.eval.data.hpatches_pairs, held-out images, 5 random homographies
-each, longer side 640): 16 pairs. Features: the shipped XFeat backbone, top-k per image. The
-loop is :class:`affcorr.export.lightglue_pieces.AdaptiveGlueOnnx` (onnxruntime, 2 threads), the
-numpy specification of the Rust loop (crates/affcorr-runner/src/lightglue.rs); the full graph is
+Pairs: graffiti 1→3 (800×640, its published H) and the viewpoint pairs of the evaluation
+suite (affcorr_bench.eval.data.hpatches_pairs, longer side 640: graffiti again and three
+held-out images under 5 random homographies each): 17 pairs. Features: the shipped XFeat
+backbone, top-k per image. The loop is
+:class:`affcorr.export.lightglue_pieces.AdaptiveGlueOnnx` (onnxruntime, 2 threads), the numpy
+specification of the Rust loop (crates/affcorr-runner/src/lightglue.rs); the full graph is
 python/affcorr/models/xfeat_lighterglue.onnx. *identical*: index pairs also found by the full
 graph / the full graph's matches; *correct*: within 3 px of H. Times: the matcher alone, sums
 over the pairs of per-pair medians, configurations alternated (so that all see the same load);
-wall and CPU (process) time.
+wall and CPU (process) time. ``--top-k`` with no values runs only the variants.
 Writes benches/results/lighterglue_adaptive.md.
 """
 
@@ -133,7 +134,8 @@ def config_runners(models: Path):
 
 
 def variant_runners(models: Path, work: Path):
-    """The default loop (0.95, 0.95) over variants of the pieces."""
+    """The default loop (0.95, 0.95) over variants of the pieces: the shipped ones (fused
+    attention, fp16-stored weights) and, with torch, fresh exports of the others."""
     from affcorr.export import lightglue_pieces as P
     from affcorr.export.xfeat_reference import XFeatOnnx
 
@@ -153,38 +155,37 @@ def variant_runners(models: Path, work: Path):
 
         runners[label] = fn
 
-    add("shared layer graph, float32 (**shipped**)", P.AdaptiveGlueOnnx(models))
-    n = P.AdaptiveGlueOnnx(models).n_layers
-    fixed = P.fixed_layer_models(models / P.PIECES["layer"], work / "fixed", n)
-    add(
-        "one model per layer (weights folded), float32",
-        P.AdaptiveGlueOnnx(models, layer_models=fixed),
-    )
-    int8 = P.quantize_int8(fixed, work / "fixed")
-    add(
-        "one model per layer, int8 dynamic quantisation",
-        P.AdaptiveGlueOnnx(models, layer_models=int8),
-    )
-    half = work / "fp16"
-    half.mkdir(exist_ok=True)
-    for f in P.PIECES.values():
-        P.fp16_weights(models / f, half)
-    add("shared layer graph, fp16 weights (cast to float32 at load)", P.AdaptiveGlueOnnx(half))
-    sizes = {
-        "shipped layer graph": (models / P.PIECES["layer"]).stat().st_size,
-        "fp16-weight layer graph": (half / P.PIECES["layer"]).stat().st_size,
-        "int8 per-layer models (sum)": sum(p.stat().st_size for p in int8),
-    }
-    fused = work / "fused"
+    add("fused attention, fp16-stored weights (**shipped**)", P.AdaptiveGlueOnnx(models))
+    sizes = {"shipped layer graph": (models / P.PIECES["layer"]).stat().st_size}
+    plain = models
     try:
         import torch  # noqa: F401
         from affcorr.export.xfeat import load_upstream_lighterglue
 
-        fused.mkdir(exist_ok=True)
-        P.export_pieces(load_upstream_lighterglue().net, fused, attention="fused")
-        add("shared layer graph, fused attention (MultiHeadAttention)", P.AdaptiveGlueOnnx(fused))
+        lg = load_upstream_lighterglue().net
+        for att in ("plain", "fused", "fused-self"):
+            d = work / att
+            d.mkdir()
+            P.export_pieces(lg, d, attention=att)
+        plain = work / "plain"
+        add("MatMul/Softmax attention, float32 weights", P.AdaptiveGlueOnnx(plain))
+        add("fused attention, float32 weights", P.AdaptiveGlueOnnx(work / "fused"))
+        add("fused self attention only, float32 weights", P.AdaptiveGlueOnnx(work / "fused-self"))
+        sizes["float32 layer graph"] = (plain / P.PIECES["layer"]).stat().st_size
     except ImportError:
         pass
+    n = P.AdaptiveGlueOnnx(models).n_layers
+    fixed = P.fixed_layer_models(plain / P.PIECES["layer"], work / "fixed", n)
+    add(
+        "one model per layer (weights folded), float32",
+        P.AdaptiveGlueOnnx(plain, layer_models=fixed),
+    )
+    int8 = P.quantize_int8(fixed, work / "fixed")
+    add(
+        "one model per layer, int8 dynamic quantisation",
+        P.AdaptiveGlueOnnx(plain, layer_models=int8),
+    )
+    sizes["int8 per-layer models (sum)"] = sum(p.stat().st_size for p in int8)
     return runners, sizes
 
 
@@ -206,7 +207,7 @@ def table(tot: dict, base: str) -> list[str]:
 
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--top-k", type=int, nargs="+", default=[1024, 2048])
+    p.add_argument("--top-k", type=int, nargs="*", default=[1024, 2048])
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--variants-top-k", type=int, default=2048)
     p.add_argument("-o", "--output", type=Path, default=OUT)
@@ -221,10 +222,12 @@ def main(argv=None) -> None:
         "# Adaptive LighterGlue: the layer loop vs the full graph (issue 21)",
         "",
         f"Command: `.venv/bin/python -m affcorr_bench.lighterglue_adaptive --top-k "
-        f"{' '.join(map(str, args.top_k))} --repeats {args.repeats}` "
+        f"{' '.join(map(str, args.top_k))} --repeats {args.repeats} "
+        f"--variants-top-k {args.variants_top_k}` "
         "(benches/affcorr_bench/lighterglue_adaptive.py; its docstring has the protocol).",
         "",
-        f"{len(plist)} pairs: graffiti 1→3 and 15 viewpoint pairs of the evaluation suite; "
+        f"{len(plist)} pairs: graffiti 1→3 (800×640, and 640×512 as the evaluation suite has "
+        "it) and 15 viewpoint pairs of the evaluation suite; "
         "the loop is the numpy/onnxruntime specification of the Rust one "
         "(`AdaptiveGlueOnnx`), 2 threads. *identical*: index pairs of the full graph found "
         "too (over all pairs); *correct*: within 3 px of H.",
