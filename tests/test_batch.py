@@ -8,12 +8,14 @@ MNN at 256 keypoints: a pair takes ~0.1 s, the file ~30 s on 2 loaded cores.
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import json
 import os
 import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any
 
@@ -187,6 +189,37 @@ def test_resume_after_an_interrupted_run(images, serial, tmp_path) -> None:
     changed = dict(OPTIONS, max_keypoints=128)
     s = batch.run(pairs[:2], folder, tmp_path, workers=1, resume=True, progress=False, **changed)
     assert (s.skipped, s.matched) == (0, 2)
+
+
+def test_resume_after_the_driver_is_killed(images, serial, tmp_path) -> None:
+    """SIGKILL of the whole run (driver and workers) once results are being written: the HDF5
+    files still open (no libver="latest" consistency flags), and a resume completes the run
+    with the serial results."""
+    folder, names = images
+    pairs_file = tmp_path / "pairs.txt"
+    pairs_file.write_text("".join(f"{a} {b}\n" for a, b in good_pairs(names)))
+    out = tmp_path / "out"
+    cmd = [
+        sys.executable, "-m", "affcorr.cli", "batch", str(pairs_file), str(folder), "-o",
+        str(out), "--matcher", "xfeat", "--max-keypoints", "256", "--views", "off",
+        "--workers", "1", "--chunk-size", "1", "--no-progress",
+    ]  # fmt: skip
+    p = subprocess.Popen(cmd, start_new_session=True, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not (out / "matches.h5").exists() and p.poll() is None:
+            assert time.monotonic() < deadline, "no pair was written in 120 s"
+            time.sleep(0.05)
+        time.sleep(0.3)
+    finally:
+        with contextlib.suppress(ProcessLookupError):
+            os.killpg(p.pid, signal.SIGKILL)
+        p.wait()
+    before = len(read_matches(out))
+    s = batch.run(good_pairs(names), folder, out, workers=1, resume=True, progress=False,
+                  **OPTIONS)  # fmt: skip
+    assert s.skipped == before and s.matched + s.skipped == len(serial) and s.failed == 0
+    assert_equals_serial(out, serial)
 
 
 def test_a_killed_local_worker_is_replaced_and_its_pairs_retried(images, serial, tmp_path):

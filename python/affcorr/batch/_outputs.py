@@ -18,7 +18,11 @@
 
 The HDF5 files are opened, written and closed for every group of results, so that between
 writes they are complete files: a crash of a worker costs nothing written, a crash of the
-driver at most the results not yet written (the pairs in flight). SQLite commits each pair.
+driver at most the results not yet written (the pairs in flight). They are written without
+``libver="latest"``, whose file-consistency flags would make a file left open by a killed
+driver unreadable until ``h5clear``. A pair's ``checksum`` attribute is written last and an
+image group counts once its four datasets are there, so a group cut short by a crash is
+redone on resume. SQLite commits each pair.
 """
 
 from __future__ import annotations
@@ -37,6 +41,8 @@ MATCHES_FILE = "matches.h5"
 FAILURES_FILE = "failures.jsonl"
 DATABASE_FILE = "database.db"
 SUMMARY_FILE = "summary.json"
+
+_IMAGE_KEYS = {"keypoints", "scores", "descriptors", "image_size"}
 
 _ARRAYS = (
     "matches0",
@@ -90,8 +96,10 @@ class HdfWriter:
             with self.h5py.File(self.features, "r") as fd:
 
                 def visit(name: str, obj: Any) -> None:
-                    if isinstance(obj, self.h5py.Dataset) and name.endswith("/keypoints"):
-                        self.images.add(name[: -len("/keypoints")])
+                    # An image group counts once all of it is there (image_size is written
+                    # last): a crash in the middle of a group rewrites it.
+                    if isinstance(obj, self.h5py.Group) and _IMAGE_KEYS <= set(obj.keys()):
+                        self.images.add(name)
 
                 fd.visititems(visit)
 
@@ -103,20 +111,20 @@ class HdfWriter:
             if name not in self.images
         ]
         if new_images:
-            with self.h5py.File(self.features, "a", libver="latest") as fd:
+            with self.h5py.File(self.features, "a") as fd:
                 for name, feat in new_images:
                     if name in self.images:
                         continue
                     if name in fd:
                         del fd[name]
                     g = fd.create_group(name)
-                    for k, v in feat.items():
-                        g.create_dataset(k, data=v)
+                    for k in ("keypoints", "scores", "descriptors", "image_size"):
+                        g.create_dataset(k, data=feat[k])
                     self.images.add(name)
         ok = [r for r in records if "error" not in r]
         if not ok:
             return
-        with self.h5py.File(self.matches, "a", libver="latest") as fd:
+        with self.h5py.File(self.matches, "a") as fd:
             for r in ok:
                 key = names_to_pair(r["name0"], r["name1"])
                 if key in fd:
@@ -127,11 +135,12 @@ class HdfWriter:
                         g.create_dataset(k, data=r[k])
                 for k, v in r["models"].items():
                     g.create_dataset(k, data=v)
-                g.attrs["checksum"] = r["checksum"]
                 g.attrs["worker"] = r["worker"]
                 g.attrs["seconds"] = r["seconds"]
                 g.attrs["view"] = r.get("view", "")
                 g.attrs["peak_rss_mb"] = r.get("peak_rss_mb", 0.0)
+                # Last: a group without its checksum (a crash while writing it) is redone.
+                g.attrs["checksum"] = r["checksum"]
 
 
 class FailureLog:

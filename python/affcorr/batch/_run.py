@@ -214,8 +214,19 @@ def run(
             pipeline_kwargs[k] = v
     probe = Pipeline(threads=1, models_dir=models_dir, **pipeline_kwargs)
     models = {k: Path(v) for k, v in probe.models.items()}
-    pipeline_kwargs["matcher"] = probe.matcher
-    pipeline_kwargs["max_keypoints"] = probe.max_keypoints
+    # The effective options, not the given ones: the checksum (and so resume) must not depend
+    # on whether a default was spelled out (the CLI passes them all).
+    pipeline_kwargs.update(
+        matcher=probe.matcher,
+        max_keypoints=probe.max_keypoints,
+        max_matches=probe.max_matches,
+        max_side=probe.max_side,
+        views=probe.views,
+        refine_affine=(
+            PIPELINE_DEFAULTS["refine_affine"] if refine_affine is None else bool(refine_affine)
+        ),
+    )
+    pipeline_kwargs.pop("shape_model", None)  # its file's digest is in model_digests
     del probe
     thr = {
         "homography": PIPELINE_DEFAULTS["homography_threshold"],
@@ -459,7 +470,7 @@ def _run_ray(
             ray.init(address=address, include_dashboard=False, log_to_driver=False)
         started = True
     try:
-        files = {p.name: p.read_bytes() for p in models.values()}
+        files = {role: path.read_bytes() for role, path in models.items()}
         shipped = dict(config, models_dir_shipped=True, models_dir=None)
         shipped["pipeline"] = {k: v for k, v in config["pipeline"].items() if k != "shape_model"}
         box = [ray.put(files)]

@@ -236,13 +236,16 @@ def process_chunk_shipped(
     if st is None or st.config["key"] != config["key"]:
         import ray
 
-        files: dict[str, bytes] = ray.get(box[0])
+        from affcorr.pipeline import _FILES
+
+        files: dict[str, bytes] = ray.get(box[0])  # {role: bytes}
         folder = Path(tempfile.mkdtemp(prefix="affcorr-models-"))
         models: dict[str, Path] = {"_dir": folder}
-        for name, data in files.items():
-            (folder / name).write_bytes(data)
-            if name == "shape.onnx":
-                models["shape"] = folder / name
+        for role, data in files.items():
+            path = folder / ("shape.onnx" if role == "shape" else _FILES[role])
+            path.write_bytes(data)
+            if role == "shape":
+                models["shape"] = path
         st = _state(config, models)
     return [st.pair(t) for t in chunk]
 
