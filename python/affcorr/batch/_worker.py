@@ -10,7 +10,7 @@ the object store, fetched once per worker process and written to a private folde
 from __future__ import annotations
 
 import os
-import resource
+import socket
 import tempfile
 import time
 from collections import OrderedDict
@@ -47,7 +47,7 @@ class _State:
         self.config = config
         self.features: OrderedDict[str, Any] = OrderedDict()
         self.reported: set[str] = set()
-        self.worker = f"{os.uname().nodename}:{os.getpid()}"
+        self.worker = f"{socket.gethostname()}:{os.getpid()}"
 
     # ------------------------------------------------------------------ features
 
@@ -126,9 +126,17 @@ class _State:
             rec = {k: rec[k] for k in ("index", "name0", "name1", "checksum", "worker")}
             rec["error"] = f"{type(e).__name__}: {e}"
         rec["seconds"] = time.perf_counter() - t0
-        # The worker's peak resident memory so far (MB; Linux reports kB).
-        rec["peak_rss_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        rec["peak_rss_mb"] = _peak_rss_mb()
         return rec
+
+
+def _peak_rss_mb() -> float:
+    """The process's peak resident memory so far, MB (Linux reports kB; 0 where unknown)."""
+    try:
+        import resource
+    except ImportError:  # not on Windows
+        return 0.0
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
 def _pair_arrays(m: Any, f0: Any, f1: Any, snap_px: float) -> dict[str, Any]:
