@@ -144,9 +144,10 @@ fn options(r: &mut Reader, n: usize) -> EstimatorOptions {
         _ => ScoringKind::Magsac,
     };
     let affine_weight = match r.u8() % 4 {
-        0 => r.f64(),
-        1 => f64::from(r.u8()) / 32.0,
-        _ => 0.0,
+        0 => Some(r.f64()),
+        1 => Some(f64::from(r.u8()) / 32.0),
+        2 => Some(0.0),
+        _ => None,
     };
     EstimatorOptions {
         ransac,

@@ -23,8 +23,8 @@ use affcorr::geom::Mat3;
 use affcorr::geom::camera::Intrinsics;
 use affcorr::ransac::problems::relpose::PoseModel;
 use affcorr::ransac::{
-    Correspondences, Estimate, EstimatorOptions, LoKind, RansacError, SampleKind, SamplerKind,
-    ScoringKind, estimate_fundamental, estimate_homography, estimate_relative_pose,
+    AffineRefinement, Correspondences, Estimate, EstimatorOptions, LoKind, RansacError, SampleKind,
+    SamplerKind, ScoringKind, estimate_fundamental, estimate_homography, estimate_relative_pose,
 };
 use numpy::{PyArray1, PyArrayDyn};
 use pyo3::exceptions::PyValueError;
@@ -98,8 +98,16 @@ estimator_options! {
     "lo_iterations" => |o, v| o.ransac.lo_iterations = to_usize(integer(v, "lo_iterations", MAX_LO_ITERATIONS)?);
     "final_refinement" => |o, v| o.ransac.final_refinement = flag(v, "final_refinement")?;
     "sprt" => |o, v| o.ransac.sprt = flag(v, "sprt")?;
-    "affine_weight" => |o, v| o.affine_weight = number(v, "affine_weight")?;
+    "affine_weight" => |o, v| o.affine_weight = if v.is_none() { None } else { Some(number(v, "affine_weight")?) };
+    "affine_refinement" => |o, v| o.ransac.affine_refinement = choice(v, "affine_refinement", AFFINE_REFINEMENTS)?;
+    "affine_confidence" => |o, v| o.affine_confidence = if v.is_none() { None } else { Some(vector(v, "affine_confidence")?) };
 }
+
+const AFFINE_REFINEMENTS: &[(&str, AffineRefinement)] = &[
+    ("off", AffineRefinement::Off),
+    ("final", AffineRefinement::Final),
+    ("all", AffineRefinement::All),
+];
 
 const SAMPLES: &[(&str, SampleKind)] = &[
     ("affine", SampleKind::Affine),

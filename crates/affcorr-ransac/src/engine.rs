@@ -273,7 +273,7 @@ where
         // so its model may score a little lower on them while fitting the data better: it is
         // kept if it loses less than AFFINE_SCORE_SLACK of the score the refinement started
         // from (a wrong basin loses far more).
-        let affine = options.affine_refinement != AffineRefinement::Off;
+        let affine = options.affine_refinement != AffineRefinement::Off && problem.refines_affine();
         let floor = if affine {
             best.score * (1.0 - AFFINE_SCORE_SLACK)
         } else {

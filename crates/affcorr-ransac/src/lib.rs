@@ -71,9 +71,9 @@ mod verify;
 pub use engine::{Estimate, estimate};
 pub use error::{RansacError, Result};
 pub use estimators::{
-    BatchOptions, EstimatorOptions, SamplerKind, ScoringKind, estimate_fundamental,
-    estimate_fundamental_batch, estimate_homography, estimate_homography_batch,
-    estimate_relative_pose, estimate_relative_pose_batch,
+    BatchOptions, DEFAULT_AFFINE_CAP, DEFAULT_AFFINE_WEIGHT, EstimatorOptions, SamplerKind,
+    ScoringKind, estimate_fundamental, estimate_fundamental_batch, estimate_homography,
+    estimate_homography_batch, estimate_relative_pose, estimate_relative_pose_batch,
 };
 pub use options::{AffineRefinement, LoKind, RansacOptions};
 pub use problem::Problem;

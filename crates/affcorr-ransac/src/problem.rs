@@ -82,6 +82,14 @@ pub trait Problem: Sync {
         None
     }
 
+    /// Whether [`Problem::refine`] adds affine terms when [`LmOptions::affine`] asks for them
+    /// (F and the relative pose on AC data with some confidence above 0). The final refinement
+    /// then accepts a model that scores slightly lower on the point residuals (engine). Default
+    /// false.
+    fn refines_affine(&self) -> bool {
+        false
+    }
+
     /// Whether local optimisation tries [`Problem::refine`] beside the linear fit
     /// ([`Problem::fit_nonminimal`]) at its narrow steps. Default true. A problem whose linear
     /// fit on the inliers already lands in the final refinement's basin can skip it: LO only

@@ -38,7 +38,11 @@ fn pose_errors(noise: &NoiseModel, seeds: u64, opts: &EstimatorOptions) -> (f64,
 }
 
 fn options(affine: AffineRefinement, scoring: ScoringKind) -> EstimatorOptions {
-    let mut o = EstimatorOptions::default();
+    // Points-only scoring: these tests are about the refinements.
+    let mut o = EstimatorOptions {
+        affine_weight: Some(0.0),
+        ..Default::default()
+    };
     o.ransac.threshold = 3.0;
     o.ransac.affine_refinement = affine;
     o.scoring = scoring;
@@ -212,4 +216,84 @@ fn bad_confidences_are_typed_errors_naming_the_option() {
             }
         }
     }
+}
+
+#[test]
+fn the_defaults_use_the_affine_terms_on_acs_only() {
+    let d = EstimatorOptions::default();
+    assert_eq!(d.affine_weight, None);
+    assert_eq!(d.scoring, ScoringKind::Auto);
+    assert_eq!(d.ransac.affine_refinement, AffineRefinement::Final);
+    // On ACs the defaults are MSAC with a capped λ = 50 px² in scoring and the affine terms in
+    // the final refinement; on points plain MSAC.
+    let mut rng = Pcg64::seed_from_u64(9);
+    let scene = PlaneScene::random(&mut rng);
+    let noise = NoiseModel {
+        planes: 3,
+        outlier_ratio: 0.4,
+        pixel_noise: 0.5,
+        affine_noise: 0.02,
+    };
+    let (acs, _) = noisy_correspondences(&mut rng, &scene, 300, &noise);
+    let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
+    let data = Correspondences::from_ac_rows(&rows).unwrap();
+    let points: Vec<[f64; 4]> = rows.iter().map(|r| [r[0], r[1], r[2], r[3]]).collect();
+    let point_data = Correspondences::from_point_rows(&points).unwrap();
+    let (k1, k2) = (&scene.k1, &scene.k2);
+    let mut off = EstimatorOptions {
+        affine_weight: Some(0.0),
+        scoring: ScoringKind::Msac,
+        ..Default::default()
+    };
+    off.ransac.affine_refinement = AffineRefinement::Off;
+    assert_ne!(
+        estimate_relative_pose(&data, k1, k2, &d).unwrap().model,
+        estimate_relative_pose(&data, k1, k2, &off).unwrap().model
+    );
+    let plain = EstimatorOptions {
+        affine_weight: Some(0.0),
+        scoring: ScoringKind::Msac,
+        ..Default::default()
+    };
+    assert_eq!(
+        estimate_relative_pose(&point_data, k1, k2, &d)
+            .unwrap()
+            .model,
+        estimate_relative_pose(&point_data, k1, k2, &plain)
+            .unwrap()
+            .model
+    );
+    // H: points only in scoring and refinement, whatever the data.
+    let h_plain = EstimatorOptions {
+        affine_weight: Some(0.0),
+        ..Default::default()
+    };
+    assert_eq!(
+        estimate_homography(&data, &d).unwrap().model,
+        estimate_homography(&data, &h_plain).unwrap().model
+    );
+}
+
+#[test]
+fn the_default_resolves_the_planar_ambiguity_that_points_leave() {
+    // One plane: E from points is two-fold ambiguous; the affine term of scoring picks the
+    // right one (benches/results/scene_families.md, family "1 plane").
+    let noise = NoiseModel {
+        planes: 1,
+        outlier_ratio: 0.3,
+        pixel_noise: 0.5,
+        affine_noise: 0.02,
+    };
+    let mut points = EstimatorOptions {
+        affine_weight: Some(0.0),
+        ..Default::default()
+    };
+    points.ransac.threshold = 1.5;
+    points.ransac.affine_refinement = AffineRefinement::Off;
+    let mut default = EstimatorOptions::default();
+    default.ransac.threshold = 1.5;
+    let p = pose_errors(&noise, 11, &points);
+    let d = pose_errors(&noise, 11, &default);
+    eprintln!("one plane: points-only scoring {p:?}, default {d:?}");
+    assert!(d.0 < 0.8 * p.0 && d.1 < 0.8 * p.1, "{d:?} vs {p:?}");
 }

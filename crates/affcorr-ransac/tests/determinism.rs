@@ -98,7 +98,7 @@ fn option_sets(n: usize) -> Vec<EstimatorOptions> {
     vec![
         EstimatorOptions {
             ransac: ransac.clone(),
-            affine_weight: 0.5,
+            affine_weight: Some(0.5),
             ..Default::default()
         },
         EstimatorOptions {

@@ -5,7 +5,8 @@
 //! - Non-minimal fit: the normalised 8-point algorithm on the inliers, from its normal equations
 //!   ([`fundamental_8pt_normal_equations`]), or AC least squares when fewer than 8.
 //! - Residual (px²): the point Sampson distance SD_P, plus, with `affine_weight` λ > 0,
-//!   λ·(SD_A,1 + SD_A,2), the affine Sampson distances of docs/design.md §3.
+//!   min(λ·c·(SD_A,1 + SD_A,2), cap), the affine Sampson distances of docs/design.md §3 with the
+//!   AC's confidence c (1 without) and a cap (+∞ unless set).
 
 use super::simd::dispatch;
 use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, epipolar_lm};
@@ -35,6 +36,8 @@ pub struct FundamentalProblem<'a> {
     affine_weight: f64,
     /// Per-AC confidence in [0, 1] of the affine terms (scoring and refinement).
     confidence: Option<&'a [f64]>,
+    /// The most the affine term adds to a residual (px²).
+    affine_cap: f64,
     threshold: f64,
     /// Hartley normalisations of the two images (centroid at 0, mean distance √2): the
     /// refinement parametrises F̃ = T2⁻ᵀ F T1⁻¹, whose singular values are of one order, where
@@ -58,6 +61,7 @@ impl<'a> FundamentalProblem<'a> {
             kind,
             affine_weight,
             confidence: None,
+            affine_cap: f64::INFINITY,
             threshold,
             t1: hartley(&data.x1),
             t2: hartley(&data.x2),
@@ -69,6 +73,22 @@ impl<'a> FundamentalProblem<'a> {
     pub fn with_affine_confidence(mut self, confidence: Option<&'a [f64]>) -> Self {
         self.confidence = confidence;
         self
+    }
+
+    /// Caps the affine term of the residual at `cap` px² (default +∞), so that a poor A can
+    /// cost an AC at most that much of its score and never its inlier status when its point
+    /// fits (the estimators' default weight uses a quarter of the threshold²).
+    pub fn with_affine_cap(mut self, cap: f64) -> Self {
+        self.affine_cap = cap;
+        self
+    }
+
+    fn affine_score(&self) -> AffineScore<'a> {
+        AffineScore {
+            weight: self.affine_weight,
+            confidence: self.confidence,
+            cap: self.affine_cap,
+        }
     }
 
     /// The pixel F of a normalised F̃: T2ᵀ F̃ T1.
@@ -95,26 +115,37 @@ impl<'a> FundamentalProblem<'a> {
     }
 }
 
-/// Squared Sampson residual (point, plus weighted affine) of datum `i` under `f`; the affine
-/// weight is scaled by the datum's confidence, if any.
+/// How the affine Sampson distances enter an epipolar residual: weight λ (px²), per-AC
+/// confidence (scaling λ), and the most (px²) the affine term may add.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct AffineScore<'a> {
+    pub weight: f64,
+    pub confidence: Option<&'a [f64]>,
+    pub cap: f64,
+}
+
+impl AffineScore<'_> {
+    /// Points only.
+    pub(crate) const NONE: AffineScore<'static> = AffineScore {
+        weight: 0.0,
+        confidence: None,
+        cap: f64::INFINITY,
+    };
+}
+
+/// Squared Sampson residual of datum `i` under `f`: SD_P + min(λ c_i (SD_A,0 + SD_A,1), cap).
 #[inline(always)]
-fn epipolar_residual(
-    data: &Correspondences,
-    f: &Mat3,
-    affine_weight: f64,
-    confidence: Option<&[f64]>,
-    i: usize,
-) -> f64 {
+fn epipolar_residual(data: &Correspondences, f: &Mat3, a: &AffineScore<'_>, i: usize) -> f64 {
     let points = PointCorrespondence {
         x1: data.x1[i],
         x2: data.x2[i],
     };
-    if affine_weight == 0.0 {
+    if a.weight == 0.0 {
         return sampson_point(f, &points);
     }
     let [a0, a1] = sampson_affine(f, &data.ac(i));
-    let w = affine_weight * confidence.map_or(1.0, |c| c[i]);
-    sampson_point(f, &points) + w * (a0 + a1)
+    let w = a.weight * a.confidence.map_or(1.0, |c| c[i]);
+    sampson_point(f, &points) + (w * (a0 + a1)).min(a.cap)
 }
 
 /// The data that can seed a good AC sample under `f` (`Problem::sample_support`); `None` for
@@ -128,7 +159,11 @@ pub(crate) fn epipolar_seeds(
     let w = SEED_AFFINE_WEIGHT;
     (kind == SampleKind::Affine).then(|| {
         count_below(data.len(), threshold_sq, |i| {
-            epipolar_residual(data, f, w, None, i)
+            let seed = AffineScore {
+                weight: w,
+                ..AffineScore::NONE
+            };
+            epipolar_residual(data, f, &seed, i)
         })
     })
 }
@@ -137,14 +172,13 @@ pub(crate) fn epipolar_seeds(
 pub(crate) fn epipolar_residuals(
     data: &Correspondences,
     f: &Mat3,
-    affine_weight: f64,
-    confidence: Option<&[f64]>,
+    affine: &AffineScore<'_>,
     start: usize,
     out: &mut [f64],
 ) {
-    if affine_weight != 0.0 {
+    if affine.weight != 0.0 {
         for (k, o) in out.iter_mut().enumerate() {
-            *o = epipolar_residual(data, f, affine_weight, confidence, start + k);
+            *o = epipolar_residual(data, f, affine, start + k);
         }
         return;
     }
@@ -169,13 +203,12 @@ pub(crate) fn epipolar_residuals(
 pub(crate) fn epipolar_residuals_at(
     data: &Correspondences,
     f: &Mat3,
-    affine_weight: f64,
-    confidence: Option<&[f64]>,
+    affine: &AffineScore<'_>,
     indices: &[usize],
     out: &mut [f64],
 ) {
     for (o, &i) in out.iter_mut().zip(indices) {
-        *o = epipolar_residual(data, f, affine_weight, confidence, i);
+        *o = epipolar_residual(data, f, affine, i);
     }
 }
 
@@ -188,6 +221,10 @@ impl Problem for FundamentalProblem<'_> {
 
     fn positions(&self) -> Option<(&[Vec2], &[Vec2])> {
         Some((&self.data.x1, &self.data.x2))
+    }
+
+    fn refines_affine(&self) -> bool {
+        self.data.has_affine() && self.confidence.is_none_or(|c| c.iter().any(|&v| v > 0.0))
     }
 
     fn sample_support(&self, f: &Mat3, threshold_sq: f64) -> Option<usize> {
@@ -236,25 +273,11 @@ impl Problem for FundamentalProblem<'_> {
     }
 
     fn residuals(&self, f: &Mat3, start: usize, out: &mut [f64]) {
-        epipolar_residuals(
-            self.data,
-            f,
-            self.affine_weight,
-            self.confidence,
-            start,
-            out,
-        );
+        epipolar_residuals(self.data, f, &self.affine_score(), start, out);
     }
 
     fn residuals_at(&self, f: &Mat3, indices: &[usize], out: &mut [f64]) {
-        epipolar_residuals_at(
-            self.data,
-            f,
-            self.affine_weight,
-            self.confidence,
-            indices,
-            out,
-        );
+        epipolar_residuals_at(self.data, f, &self.affine_score(), indices, out);
     }
 
     /// Levenberg–Marquardt on the rank-2 manifold of the Sampson error (plus, with

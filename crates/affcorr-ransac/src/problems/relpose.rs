@@ -8,7 +8,7 @@
 //! - Residual (px²): the Sampson distance of F = K2⁻ᵀ E K1⁻¹ on the pixel coordinates, exact
 //!   for any fx ≠ fy (no mean-focal approximation), plus the weighted affine Sampson distances.
 
-use super::fundamental::{epipolar_residuals, epipolar_residuals_at, epipolar_seeds};
+use super::fundamental::{AffineScore, epipolar_residuals, epipolar_residuals_at, epipolar_seeds};
 use super::{Correspondences, SampleKind, epipolar_lm};
 use crate::loss::Loss;
 use crate::problem::Problem;
@@ -50,6 +50,8 @@ pub struct RelativePoseProblem<'a> {
     affine_weight: f64,
     /// Per-AC confidence in [0, 1] of the affine terms (scoring and refinement).
     confidence: Option<&'a [f64]>,
+    /// The most the affine term adds to a residual (px²).
+    affine_cap: f64,
     /// Squared residual below which cheirality is checked.
     cheirality_cap_sq: f64,
 }
@@ -91,6 +93,7 @@ impl<'a> RelativePoseProblem<'a> {
             kind,
             affine_weight,
             confidence: None,
+            affine_cap: f64::INFINITY,
             cheirality_cap_sq: cheirality_threshold.powi(2),
         }
     }
@@ -100,6 +103,21 @@ impl<'a> RelativePoseProblem<'a> {
     pub fn with_affine_confidence(mut self, confidence: Option<&'a [f64]>) -> Self {
         self.confidence = confidence;
         self
+    }
+
+    /// Caps the affine term of the residual at `cap` px² (as
+    /// [`super::fundamental::FundamentalProblem::with_affine_cap`]).
+    pub fn with_affine_cap(mut self, cap: f64) -> Self {
+        self.affine_cap = cap;
+        self
+    }
+
+    fn affine_score(&self) -> AffineScore<'a> {
+        AffineScore {
+            weight: self.affine_weight,
+            confidence: self.confidence,
+            cap: self.affine_cap,
+        }
     }
 
     /// The model of a pose.
@@ -143,6 +161,10 @@ impl Problem for RelativePoseProblem<'_> {
 
     fn positions(&self) -> Option<(&[Vec2], &[Vec2])> {
         Some((&self.pixels.x1, &self.pixels.x2))
+    }
+
+    fn refines_affine(&self) -> bool {
+        self.pixels.has_affine() && self.confidence.is_none_or(|c| c.iter().any(|&v| v > 0.0))
     }
 
     fn sample_support(&self, m: &PoseModel, threshold_sq: f64) -> Option<usize> {
@@ -196,8 +218,7 @@ impl Problem for RelativePoseProblem<'_> {
         epipolar_residuals(
             self.pixels,
             &m.fundamental,
-            self.affine_weight,
-            self.confidence,
+            &self.affine_score(),
             start,
             out,
         );
@@ -210,8 +231,7 @@ impl Problem for RelativePoseProblem<'_> {
         epipolar_residuals_at(
             self.pixels,
             &m.fundamental,
-            self.affine_weight,
-            self.confidence,
+            &self.affine_score(),
             indices,
             out,
         );
@@ -374,7 +394,13 @@ mod tests {
         assert_eq!(r[1], f64::INFINITY);
         // The epipolar constraint alone accepts it.
         let mut sampson = [0.0; 2];
-        epipolar_residuals(&data, &model.fundamental, 0.0, None, 0, &mut sampson);
+        epipolar_residuals(
+            &data,
+            &model.fundamental,
+            &AffineScore::NONE,
+            0,
+            &mut sampson,
+        );
         assert!(sampson[1] < 1e-12, "{sampson:?}");
         // The SPRT's indexed form agrees.
         let mut at = [0.0; 2];
