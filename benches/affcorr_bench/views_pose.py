@@ -108,7 +108,7 @@ def main(argv=None) -> None:
     for r in ROTATIONS:
         for mode in ("off", "auto"):
             sel = [x for x in rows if x["rotation_deg"] == r and x["views"] == mode]
-            used = Counter(x["view"] for x in sel if x["solved"] and x["view"] != "plain")
+            used = Counter(x["view"] for x in sel if x["solved"] and x["view"] not in ("plain", ""))
             auc = pose_auc([x["pose_error_deg"] for x in sel])
             table.append(
                 [

@@ -29,8 +29,8 @@ use crate::grow::{GrowOptions, grow};
 use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
 use crate::views::{
-    ViewMode, ViewOptions, ViewReport, ViewSpec, candidate_views, guided_view,
-    verified_fundamental, verify,
+    RIVAL_MARGIN, ViewMode, ViewOptions, ViewReport, ViewSpec, WEAK_RATIO, candidate_views,
+    guided_view, rival_views, verified_fundamental, verify,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -644,13 +644,22 @@ impl Pipeline {
             verified,
             time: start.elapsed(),
         }];
-        if verified && o.mode == ViewMode::Auto {
+        // A weak verification (few of the matches agree) may be a repetitive pattern matched
+        // at the wrong rotation: the rotated views are its rivals (see `views::WEAK_RATIO`).
+        let weak = verified && (inliers as f64) < WEAK_RATIO * plain.corrs.len() as f64;
+        if verified && !weak && o.mode == ViewMode::Auto {
             return Ok((plain, reports));
         }
+        let rival_floor = if weak && o.mode == ViewMode::Auto {
+            (RIVAL_MARGIN * inliers as f64).ceil() as usize
+        } else {
+            0
+        };
         tracing::info!(
             matches = plain.corrs.len(),
             inliers,
-            "the plain pair does not verify: trying synthetic views"
+            weak,
+            "the plain pair does not verify (or only weakly): trying synthetic views"
         );
         let inlier_acs: Vec<[f64; 8]> = plain
             .corrs
@@ -659,9 +668,14 @@ impl Pipeline {
             .filter(|(_, m)| **m)
             .map(|(r, _)| *r)
             .collect();
-        let mut queue: std::collections::VecDeque<ViewSpec> =
-            guided_view(&inlier_acs).into_iter().collect();
-        queue.extend(candidate_views());
+        let mut queue: std::collections::VecDeque<ViewSpec> = if rival_floor > 0 {
+            rival_views().into()
+        } else {
+            let mut q: std::collections::VecDeque<ViewSpec> =
+                guided_view(&inlier_acs).into_iter().collect();
+            q.extend(candidate_views());
+            q
+        };
         let (mut best, mut best_inliers) = (plain, if verified { inliers } else { 0 });
         // A view whose matches partly agree (too few to verify) guides the next one: the
         // dominant map of its agreeing ACs, in the original images, is undone first.
@@ -741,7 +755,7 @@ impl Pipeline {
                 verified,
                 time: t.elapsed(),
             });
-            if verified && inliers > best_inliers {
+            if verified && inliers > best_inliers && inliers >= rival_floor {
                 best_inliers = inliers;
                 best = WorkMatches { corrs, ..m };
                 if o.mode == ViewMode::Auto {
