@@ -24,10 +24,9 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
                                       quadratic), ``"magsac"`` (MAGSAC++: the sigma-consensus++
                                       loss marginalised over noise scales up to
                                       ``threshold / 3.64``; also the loss of local optimisation
-                                      and of the final refinement; robust to a loose threshold)
-                                      or ``"auto"``: MAGSAC++ for F and the relative pose, MSAC
-                                      for H (the more accurate of the two for each in the peer
-                                      benchmark)
+                                      and of the final refinement) or ``"auto"``: MSAC for every
+                                      problem (the measured best on the scene families,
+                                      docs/estimation.md)
   ``confidence``         ``0.9999``   confidence of the adaptive stopping rule, in (0, 1)
   ``sample_reliability`` ``1.0``      rho in ``(0, 1]`` in the stopping rule
                                       ``log(1 - confidence) / log(1 - rho w^m)``, where w is
@@ -51,14 +50,27 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
                                       epsilon and delta): far fewer residuals for the same
                                       accuracy, slightly more iterations; ``False``: verify every
                                       hypothesis on all data
-  ``affine_weight``      ``0.0``      weight of the affine residual in scoring (``(N, 8)``
-                                      only; 0: points only); see the Rust problem docs
+  ``affine_weight``      ``None``     weight (px^2) of the affine residual in scoring (``(N, 8)``
+                                      only; 0: points only); ``None``: 50, its term capped at
+                                      ``threshold**2 / 4``, for F and the relative pose on ACs,
+                                      0 otherwise (H, points); a given weight is not capped
+  ``affine_refinement``  ``"final"``  where the affine Sampson terms of ACs enter the fits of F
+                                      and the relative pose (``(N, 8)`` only): ``"off"``,
+                                      ``"final"`` (the final refinement) or ``"all"`` (local
+                                      optimisation too); the noise scale of A is estimated
+                                      from the inliers and a poor A is down-weighted by a
+                                      Cauchy loss (docs/estimation.md); H uses points only
+  ``affine_confidence``  ``None``     ``(N,)`` per-AC confidence in ``[0, 1]`` scaling its
+                                      affine terms (scoring with ``affine_weight``, and the
+                                      refinements); 0 makes an AC a point; ``(N, 8)`` only; in
+                                      the batch forms give it per pair in ``pair_options``
   ====================== ============ =========================================================
 
   ``affcorr.ESTIMATOR_OPTIONS`` lists the names. An unknown name raises ``ValueError``.
 - Invalid input raises ``ValueError`` naming the argument or option: a bad shape, NaN or
   infinity, an invalid ``K``, ``threshold <= 0``, fewer correspondences than a minimal sample,
-  PROSAC without ``quality`` or with the wrong length, ``sample="affine"`` with ``(N, 4)`` data.
+  PROSAC without ``quality`` or with the wrong length, ``sample="affine"`` with ``(N, 4)`` data,
+  an ``affine_confidence`` of the wrong length, outside ``[0, 1]`` or with ``(N, 4)`` data.
 - When no model is found (every sample degenerate, or no inlier at all), nothing is raised: as
   in PoseLib, ``info.num_inliers == 0`` and ``info.inliers`` is all ``False``
   (``info.num_iterations`` still counts the samples drawn); the model is filled with NaN so

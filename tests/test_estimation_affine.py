@@ -1,0 +1,126 @@
+"""The affine terms of the estimators (issue 22): ``affine_refinement`` and
+``affine_confidence`` through the Python API, on scenes of the scene-family benchmark's own
+generator (affcorr_bench.scene_families.make_scene, numpy only)."""
+
+from __future__ import annotations
+
+import affcorr
+import numpy as np
+import pytest
+from affcorr_bench import scene_families as sf
+
+
+def scenes(aff: float, px: float, seeds: int = 7, problem: str = "relpose"):
+    s = {**sf.BASE, "aff": aff, "px": px, "outliers": 0.3, "planes": 3}
+    return [sf.make_scene(np.random.default_rng([7, i]), problem, 400, s) for i in range(seeds)]
+
+
+POINTS = dict(affine_weight=0.0, affine_refinement="off")
+
+
+def pose_error(scene, **opts) -> float:
+    pose, info = affcorr.estimate_relative_pose(
+        scene["corrs"], scene["K1"], scene["K2"], threshold=3.0, **opts
+    )
+    assert info.num_inliers > 0
+    r, t = sf.pose_errors(pose.R, pose.t, scene)
+    return max(r, t)
+
+
+def test_accurate_acs_beat_points_on_the_same_matches():
+    # 1 px on the points, A to 0.1%: the affine terms carry most of the information.
+    data = scenes(aff=0.001, px=1.0)
+    for scoring in ("msac", "magsac"):
+        points = np.median([pose_error(s, scoring=scoring, **POINTS) for s in data])
+        affine = np.median(
+            [
+                pose_error(s, scoring=scoring, affine_weight=0.0, affine_refinement="all")
+                for s in data
+            ]
+        )
+        assert affine < 0.7 * points, (scoring, affine, points)
+    # the default (MSAC, the capped affine term in scoring, the affine final refinement) too
+    default = np.median([pose_error(s) for s in data])
+    assert default < 0.7 * np.median([pose_error(s, scoring="msac", **POINTS) for s in data])
+
+
+def test_poor_acs_are_never_much_worse_than_points():
+    data = scenes(aff=0.3, px=0.5)
+    points = np.median([pose_error(s, scoring="msac", **POINTS) for s in data])
+    affine = np.median([pose_error(s, scoring="msac", affine_refinement="all") for s in data])
+    default = np.median([pose_error(s) for s in data])
+    assert affine < 1.1 * points, (affine, points)
+    assert default < 1.1 * points, (default, points)
+
+
+def test_zero_confidence_is_points_and_confidence_is_per_ac():
+    s = scenes(aff=0.01, px=0.5, seeds=1)[0]
+    n = len(s["corrs"])
+    k = (s["corrs"], s["K1"], s["K2"])
+    # points-only scoring, so that a confidence of 0 leaves points only
+    off, _ = affcorr.estimate_relative_pose(
+        *k, threshold=3.0, scoring="msac", affine_weight=0.0, affine_refinement="off"
+    )
+    zero, _ = affcorr.estimate_relative_pose(
+        *k, threshold=3.0, scoring="msac", affine_refinement="all", affine_confidence=np.zeros(n)
+    )
+    one, _ = affcorr.estimate_relative_pose(
+        *k, threshold=3.0, scoring="msac", affine_refinement="all", affine_confidence=np.ones(n)
+    )
+    default, _ = affcorr.estimate_relative_pose(
+        *k, threshold=3.0, scoring="msac", affine_refinement="all"
+    )
+    np.testing.assert_array_equal(zero.R, off.R)
+    np.testing.assert_array_equal(one.R, default.R)
+    assert not np.array_equal(one.R, off.R)
+    # F takes them too, and the batch form per pair.
+    f_scene = scenes(aff=0.001, px=1.0, seeds=1, problem="fundamental")[0]
+    F, info = affcorr.estimate_fundamental(
+        f_scene["corrs"],
+        threshold=3.0,
+        affine_refinement="final",
+        affine_confidence=np.full(len(f_scene["corrs"]), 0.5),
+    )
+    assert info.num_inliers > 0 and abs(np.linalg.det(F)) < 1e-12
+    out = affcorr.estimate_relative_pose_batch(
+        [s["corrs"], s["corrs"]],
+        s["K1"],
+        s["K2"],
+        threshold=3.0,
+        scoring="msac",
+        affine_refinement="all",
+        pair_options=[{"affine_confidence": np.zeros(n)}, None],
+    )
+    np.testing.assert_array_equal(out[0][0].R, off.R)
+    np.testing.assert_array_equal(out[1][0].R, default.R)
+
+
+@pytest.mark.parametrize(
+    "value, match",
+    [
+        (np.ones(10), "one value per correspondence"),
+        (np.full(50, 1.5), r"\[0, 1\]"),
+        (np.full(50, -0.1), r"\[0, 1\]"),
+        (np.full(50, np.nan), "affine_confidence"),
+        ("high", "affine_confidence"),
+    ],
+)
+def test_bad_confidences_raise_value_errors_naming_the_option(value, match):
+    s = scenes(aff=0.01, px=0.5, seeds=1)[0]
+    c = s["corrs"][:50]
+    for call in (
+        lambda **o: affcorr.estimate_homography(c, **o),
+        lambda **o: affcorr.estimate_fundamental(c, **o),
+        lambda **o: affcorr.estimate_relative_pose(c, s["K1"], s["K2"], **o),
+    ):
+        with pytest.raises(ValueError, match=match):
+            call(affine_confidence=value)
+
+
+def test_confidence_needs_acs_and_refinement_a_known_choice():
+    s = scenes(aff=0.01, px=0.5, seeds=1)[0]
+    with pytest.raises(ValueError, match=r"affine_confidence.*\(N, 8\)"):
+        affcorr.estimate_fundamental(s["corrs"][:, :4], affine_confidence=np.ones(400))
+    with pytest.raises(ValueError, match="affine_refinement must be one of"):
+        affcorr.estimate_fundamental(s["corrs"], affine_refinement="lo")
+    assert {"affine_refinement", "affine_confidence"} <= set(affcorr.ESTIMATOR_OPTIONS)

@@ -1,0 +1,63 @@
+"""The scene-family benchmark's generator (affcorr_bench.scene_families): exact geometry before
+noise, the requested outlier share, and the errors it reports."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from affcorr_bench import scene_families as sf
+
+
+def skew(t):
+    return np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0.0]])
+
+
+@pytest.mark.parametrize("problem", sf.PROBLEMS)
+@pytest.mark.parametrize("over", [{}, {"narrow": True, "aniso": False}, {"planes": 8}])
+def test_noise_free_scenes_are_exact(problem, over):
+    s = {**sf.BASE, **over, "px": 0.0, "aff": 0.0, "outliers": 0.3}
+    sc = sf.make_scene(np.random.default_rng(3), problem, 500, s)
+    c, inl = sc["corrs"], sc["inlier"]
+    assert c.shape == (500, 8) and abs(inl.mean() - 0.7) < 0.01
+    assert np.allclose(sc["R"] @ sc["R"].T, np.eye(3)) and np.isclose(np.linalg.norm(sc["t"]), 1)
+    f = np.linalg.inv(sc["K2"]).T @ skew(sc["t"]) @ sc["R"] @ np.linalg.inv(sc["K1"])
+    p1, p2 = np.c_[c[:, :2], np.ones(500)], np.c_[c[:, 2:4], np.ones(500)]
+    l1, l2 = p1 @ f.T, p2 @ f
+    scale = np.abs(l1[:, :2]).max()
+    # p2^T F p1 = 0 and the affine constraint A^T (F p1)_12 + (F^T p2)_12 = 0 on the inliers
+    e = np.sum(p2 * l1, axis=1)
+    a = c[:, 4:].reshape(-1, 2, 2)
+    r = np.einsum("nik,ni->nk", a, l1[:, :2]) + l2[:, :2]
+    assert np.abs(e[inl]).max() < 1e-9 * scale * 640
+    assert np.abs(r[inl]).max() < 1e-9 * scale
+    assert np.median(np.abs(e[~inl])) > 1e-3 * scale * 640
+    if problem == "homography":
+        q = p1[inl] @ sc["H"].T
+        assert np.abs(q[:, :2] / q[:, 2:] - c[inl, 2:4]).max() < 1e-9
+        # A is the Jacobian of H: a finite difference of H agrees
+        x, h = c[inl][0, :2], 1e-4
+        hx = lambda x: (sc["H"] @ np.r_[x, 1])[:2] / (sc["H"] @ np.r_[x, 1])[2]  # noqa: E731
+        jac = np.c_[
+            (hx(x + [h, 0]) - hx(x - [h, 0])) / 2 / h, (hx(x + [0, h]) - hx(x - [0, h])) / 2 / h
+        ]
+        assert np.allclose(jac.reshape(4), c[inl][0, 4:], atol=1e-6)
+
+
+def test_noise_has_the_requested_scale():
+    s = {**sf.BASE, "px": 1.0, "aff": 0.05, "outliers": 0.0}
+    exact = sf.make_scene(
+        np.random.default_rng(4), "homography", 2000, {**s, "px": 0.0, "aff": 0.0}
+    )
+    noisy = sf.make_scene(np.random.default_rng(4), "homography", 2000, s)
+    q = np.c_[noisy["corrs"][:, :2], np.ones(2000)] @ noisy["H"].T
+    d = q[:, :2] / q[:, 2:] - noisy["corrs"][:, 2:4]
+    # x1 and x2 both carry 1 px: the transfer residual is ~ sqrt(1 + |A|^2) px per coordinate
+    assert 0.9 < np.std(d) / np.sqrt(1 + np.mean(np.abs(exact["corrs"][:, 4:]) ** 2) * 2) < 1.4
+
+
+def test_errors_of_the_truth_are_zero_and_failures_count_as_the_worst():
+    sc = sf.make_scene(np.random.default_rng(5), "relpose", 300, sf.BASE)
+    assert sf.errors("relpose", dict(R=sc["R"], t=sc["t"]), sc) == pytest.approx((0, 0), abs=1e-5)
+    assert sf.errors("relpose", None, sc) == (180.0, 180.0)
+    h = sf.make_scene(np.random.default_rng(5), "homography", 300, sf.BASE)
+    assert sf.errors("homography", dict(H=h["H"] * 3.0), h)[0] < 1e-9
