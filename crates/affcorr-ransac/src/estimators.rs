@@ -63,9 +63,9 @@ pub struct EstimatorOptions {
     /// Scoring function. Default [`ScoringKind::Auto`].
     pub scoring: ScoringKind,
     /// Weight λ (px²) of the affine residual in scoring; `Some(0.0)`: points only. `None`
-    /// (default): [`DEFAULT_AFFINE_WEIGHT`], its term capped at [`DEFAULT_AFFINE_CAP`] × the
-    /// threshold², for the fundamental matrix and the relative pose when the data carry A; 0
-    /// otherwise (H, points). A weight given here is not capped. See each problem's module for its units.
+    /// (default): [`DEFAULT_AFFINE_WEIGHT`] for the fundamental matrix and the relative pose
+    /// when the data carry A, falling back to 0 when A is too poor
+    /// ([`DEFAULT_AFFINE_FALLBACK`]); 0 otherwise (H, points). See each problem's module for its units.
     pub affine_weight: Option<f64>,
     /// Per-AC confidence in [0, 1] of the affine part ((N, 8) data only): it scales each AC's
     /// affine term in scoring (with `affine_weight`) and in the refinements (with
@@ -81,22 +81,34 @@ pub struct EstimatorOptions {
 /// at a cost of ≤ 1.3× where A is noisy (10%); H gains nothing from it (up to 1.45× worse).
 pub const DEFAULT_AFFINE_WEIGHT: f64 = 50.0;
 
-/// The cap of the default affine term, as a fraction of the threshold²: an AC whose A is poor
-/// (learned ACs' are off by ~30%, where λ·SD_A alone is ~2τ²) loses at most a quarter of its
-/// score and stays an inlier when its point fits to 0.87 τ (tests/synthetic.rs).
-pub const DEFAULT_AFFINE_CAP: f64 = 0.25;
+/// The default affine term gives way to points when it costs too many inliers: if the
+/// default run's inliers are fewer than this share of the data its model explains by their
+/// points alone, A is too poor to score with (learned ACs can be off by 30%, where λ·SD_A alone
+/// is ~4 threshold²: tests/synthetic.rs) and the estimate is run again with points-only scoring
+/// (the affine refinement still weighs A by its own estimated noise scale). An uncapped term
+/// is what removes the planar and narrow-baseline ambiguities (a cap at threshold²/4 lost them:
+/// benches/results/scene_families.md).
+pub const DEFAULT_AFFINE_FALLBACK: f64 = 0.8;
 
-/// The affine weight of an epipolar problem (F, relative pose) under `opts` on `data`, and the
-/// cap of its term (px²): the user's weight uncapped, or the default capped.
-fn epipolar_affine_weight(data: &Correspondences, opts: &EstimatorOptions) -> (f64, f64) {
+/// The affine scoring weight of an epipolar problem (F, relative pose) under `opts` on `data`,
+/// and whether it is the default (which may fall back to points).
+fn epipolar_affine_weight(data: &Correspondences, opts: &EstimatorOptions) -> (f64, bool) {
     match opts.affine_weight {
-        Some(w) => (w, f64::INFINITY),
-        None if data.has_affine() => (
-            DEFAULT_AFFINE_WEIGHT,
-            DEFAULT_AFFINE_CAP * opts.ransac.threshold.powi(2),
-        ),
-        None => (0.0, f64::INFINITY),
+        Some(w) => (w, false),
+        None if data.has_affine() => (DEFAULT_AFFINE_WEIGHT, true),
+        None => (0.0, false),
     }
+}
+
+/// Whether the default affine term cost too many inliers under `est`'s model: fewer than
+/// [`DEFAULT_AFFINE_FALLBACK`] × the data below the threshold on `points` (the same problem
+/// scored on points only).
+fn affine_too_poor<P: Problem>(points: &P, est: &Estimate<P::Model>, threshold: f64) -> bool {
+    let mut r = vec![0.0; points.len()];
+    points.residuals(&est.model, 0, &mut r);
+    let t2 = threshold * threshold;
+    let explained = r.iter().filter(|&&v| v < t2).count();
+    (est.num_inliers as f64) < DEFAULT_AFFINE_FALLBACK * explained as f64
 }
 
 fn sample_kind(data: &Correspondences, opts: &EstimatorOptions) -> Result<SampleKind> {
@@ -215,14 +227,18 @@ pub fn estimate_fundamental(
     opts: &EstimatorOptions,
 ) -> Result<Estimate<Mat3>> {
     let kind = sample_kind(data, opts)?;
-    let (weight, cap) = epipolar_affine_weight(data, opts);
-    run(
-        &FundamentalProblem::new(data, kind, weight, opts.ransac.threshold)
+    let (weight, default) = epipolar_affine_weight(data, opts);
+    let problem = |w| {
+        FundamentalProblem::new(data, kind, w, opts.ransac.threshold)
             .with_affine_confidence(opts.affine_confidence.as_deref())
-            .with_affine_cap(cap),
-        opts,
-        ScoringKind::Msac,
-    )
+    };
+    let est = run(&problem(weight), opts, ScoringKind::Msac);
+    match est {
+        Ok(e) if default && affine_too_poor(&problem(0.0), &e, opts.ransac.threshold) => {
+            run(&problem(0.0), opts, ScoringKind::Msac)
+        }
+        other => other,
+    }
 }
 
 /// Robust relative pose X2 = R X1 + t (|t| = 1) from pixel correspondences and intrinsics.
@@ -235,20 +251,29 @@ pub fn estimate_relative_pose(
     opts: &EstimatorOptions,
 ) -> Result<Estimate<PoseModel>> {
     let kind = sample_kind(data, opts)?;
-    let (weight, cap) = epipolar_affine_weight(data, opts);
+    let (weight, default) = epipolar_affine_weight(data, opts);
     // Cheirality is checked wherever a datum can count as an inlier: below the widest threshold
     // of local optimisation's schedule.
-    let problem = RelativePoseProblem::new(
-        data,
-        *k1,
-        *k2,
-        kind,
-        weight,
-        LO_SCHEDULE[0] * opts.ransac.threshold,
-    )
-    .with_affine_confidence(opts.affine_confidence.as_deref())
-    .with_affine_cap(cap);
+    let make = |w| {
+        RelativePoseProblem::new(
+            data,
+            *k1,
+            *k2,
+            kind,
+            w,
+            LO_SCHEDULE[0] * opts.ransac.threshold,
+        )
+        .with_affine_confidence(opts.affine_confidence.as_deref())
+    };
+    let mut problem = make(weight);
     let mut est = run(&problem, opts, ScoringKind::Msac)?;
+    if default {
+        let points = make(0.0);
+        if affine_too_poor(&points, &est, opts.ransac.threshold) {
+            est = run(&points, opts, ScoringKind::Msac)?;
+            problem = points;
+        }
+    }
     let idx: Vec<usize> = (0..data.len()).filter(|&i| est.inliers[i]).collect();
     let (x1, x2): (Vec<_>, Vec<_>) = idx
         .iter()

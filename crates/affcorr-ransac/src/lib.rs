@@ -71,7 +71,7 @@ mod verify;
 pub use engine::{Estimate, estimate};
 pub use error::{RansacError, Result};
 pub use estimators::{
-    BatchOptions, DEFAULT_AFFINE_CAP, DEFAULT_AFFINE_WEIGHT, EstimatorOptions, SamplerKind,
+    BatchOptions, DEFAULT_AFFINE_FALLBACK, DEFAULT_AFFINE_WEIGHT, EstimatorOptions, SamplerKind,
     ScoringKind, estimate_fundamental, estimate_fundamental_batch, estimate_homography,
     estimate_homography_batch, estimate_relative_pose, estimate_relative_pose_batch,
 };
