@@ -739,12 +739,13 @@ def report(rows: list[dict], args, fams, meta) -> None:
         "(Sampson, E and F), max(2, 3.5 px) (transfer, H).",
         "",
         "Candidates: `ac-auto` / `pts-auto` are affcorr's defaults (on ACs for F and E: MSAC, "
-        "the affine term in scoring with λ = 50 px² capped at threshold²/4, and in the final "
+        "the affine term in scoring with λ = 50 px² (points-only scoring when A is too poor), "
+        "and in the final "
         "refinement; on points and for H: MSAC). The others: `ac-*` affcorr on the (N, 8) ACs "
         "(2-AC samples for E and H, 3-AC for F), "
         "`pts-*` affcorr on "
         "the same matches' points; `auto`/`msac`/`magsac`: the scoring; `-score50`: "
-        "`affine_weight=50` (uncapped) in "
+        "`affine_weight=50` (explicit: no fallback) in "
         'scoring; `-afffinal` / `-affall`: `affine_refinement="final"` / `"all"` '
         "(affine terms in the final "
         "refinement / also in local optimisation); `ptsample-msac-affall`: point samples of "

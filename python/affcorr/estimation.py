@@ -51,9 +51,9 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
                                       accuracy, slightly more iterations; ``False``: verify every
                                       hypothesis on all data
   ``affine_weight``      ``None``     weight (px^2) of the affine residual in scoring (``(N, 8)``
-                                      only; 0: points only); ``None``: 50, its term capped at
-                                      ``threshold**2 / 4``, for F and the relative pose on ACs,
-                                      0 otherwise (H, points); a given weight is not capped
+                                      only; 0: points only); ``None``: 50 for F and the relative
+                                      pose on ACs (points-only scoring again when it costs over
+                                      20% of the inliers: A too poor), 0 otherwise (H, points)
   ``affine_refinement``  ``"final"``  where the affine Sampson terms of ACs enter the fits of F
                                       and the relative pose (``(N, 8)`` only): ``"off"``,
                                       ``"final"`` (the final refinement) or ``"all"`` (local
