@@ -9,9 +9,13 @@
 //!    rather than H, so that non-planar scenes verify. Points alone are not enough: a few
 //!    dozen wrong matches of a rotated pair often fit some F within 2 px, while their ACs
 //!    rarely fit it (benches/results/views.md has the measurement).
+//!    A pass that verifies only weakly (under [`WEAK_RATIO`] of its matches agree: a
+//!    repetitive pattern matched at the wrong rotation looks like this) is rivalled by B
+//!    rotated by 90°, 270° and 180° ([`rival_views`]); a rival with [`RIVAL_MARGIN`] times
+//!    its inliers replaces it.
 //! 2. If it fails (and [`ViewMode::Auto`]), synthetic views of one image are matched against
 //!    the other, in order, until one verifies ([`ViewMode::Full`] tries them all and keeps
-//!    the best):
+//!    the best), within [`ViewOptions::relative_budget`]:
 //!    - **AC-guided** first: when the plain pass has a few F-inliers, their median affine map
 //!      D says the dominant rotation, zoom and tilt; the view undoes it (B by D⁻¹, or A by D
 //!      when that shrinks instead of enlarging). Later, any view whose ACs partly agree (more
@@ -21,8 +25,10 @@
 //!    - in-plane **rotations** of B by 90°, 270°, 180° (the matchers hold up to about ±45°),
 //!      **zooms** of A or B by ½, the diagonal rotations, then zooms by ¼ (the matcher's
 //!      keypoint budget lands on the overlap);
-//!    - **tilts** t = 2 (4 directions) and t = 4 (8 directions) of A, then of B; then t = 4
-//!      (8 directions) of A rotated by 90°, 270° and 180° (a steep tilt of a rotated pair).
+//!    - **tilts** t = 2 (4 directions) of A and of B, t = 4 (8 directions) of A, **tiles** of
+//!      B (half its size, magnified by 2, against A shrunk by ½: A a 4–8× zoom into B),
+//!      t = 4 of B, tiles of A; then t = 4 (8 directions) of A rotated by 90°, 270° and
+//!      180° (a steep tilt of a rotated pair).
 //! 3. Every AC of a view is mapped back to the original images with its A composed with the
 //!    synthetic warp ([`affcorr_image::ac_from_views`]), so the ACs are correct in the
 //!    original pixels whichever view produced them.
