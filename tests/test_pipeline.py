@@ -79,7 +79,14 @@ def test_matches_reproduce_the_numpy_reference(matcher, data, reference):
     a, b, H = data
     method = MATCHERS[matcher][0]
     ref = getattr(reference, method)(a, b)
-    res = pipeline(matcher).match_pair(a, b)
+    # The numpy reference specifies the full LighterGlue graph; the default adaptive loop
+    # (early exit) is checked against the full graph in tests/test_lighterglue_adaptive.py.
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("AFFCORR_LIGHTERGLUE", "full")
+        full = affcorr.Pipeline(
+            matcher, max_keypoints=4096, threads=2, refine_affine=False, views="off"
+        )
+    res = full.match_pair(a, b)
     ours = (res.corrs[:, :2], res.corrs[:, 2:4])
     same = R.common_matches(ref, ours, tol=0.01)
     assert len(ref[0]) > 500
