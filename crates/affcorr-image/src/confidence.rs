@@ -274,7 +274,7 @@ fn clamp_ln(v: f64, lo: f64, hi: f64) -> f64 {
 
 /// Per AC: (median ‖A − A_j‖_F over its [`NEIGHBOURS`] nearest ACs in image A, ‖A − M‖_F with
 /// M the least-squares affine map of their x1 → x2 displacements); a missing value (too few
-/// ACs, collinear neighbours) is [`MISSING_NEIGHBOURS`].
+/// ACs, collinear neighbours) is `MISSING_NEIGHBOURS` (0.3).
 pub fn neighbour_agreement(corrs: &[[f64; 8]]) -> Vec<(f64, f64)> {
     let points: Vec<[f64; 2]> = corrs.iter().map(|c| [c[0], c[1]]).collect();
     let knn = nearest_neighbours(&points, NEIGHBOURS);

@@ -281,7 +281,7 @@ impl Problem for FundamentalProblem<'_> {
     }
 
     /// Levenberg–Marquardt on the rank-2 manifold of the Sampson error (plus, with
-    /// `options.affine`, the affine terms of [`epipolar_lm`]).
+    /// `options.affine`, the affine terms of `epipolar_lm`).
     fn refine(
         &self,
         model: &Mat3,

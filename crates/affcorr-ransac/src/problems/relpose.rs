@@ -241,7 +241,7 @@ impl Problem for RelativePoseProblem<'_> {
     }
 
     /// Levenberg–Marquardt on the manifold (R, t ∈ S²) of the pixel Sampson error (plus, with
-    /// `options.affine`, the affine terms of [`epipolar_lm`]).
+    /// `options.affine`, the affine terms of `epipolar_lm`).
     fn refine(
         &self,
         model: &PoseModel,
