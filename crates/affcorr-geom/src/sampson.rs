@@ -1122,7 +1122,8 @@ mod tests {
             let g = sampson_point_grad(&f, &ac.points());
             prop_assert!(dot(&g.d_f, 1.0).abs() < 1e-9);
             let gl = sampson_point_grad(&(f * lambda), &ac.points());
-            prop_assert!((gl.value - g.value).abs() < 1e-10 * g.value + 1e-14);
+            // Roundoff: F scaled by λ up to 50 changes the rounding of every product.
+            prop_assert!((gl.value - g.value).abs() < 1e-9 * g.value + 1e-12);
             for gk in sampson_affine_grad(&f, &ac) {
                 prop_assert!(gk.value > 0.0);
                 prop_assert!(dot(&gk.d_f, 1.0).abs() < 1e-9);
