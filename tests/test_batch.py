@@ -146,6 +146,15 @@ def test_local_batch_equals_serial_with_hloc_layout(images, serial, tmp_path) ->
             assert len(g["_attrs"]["checksum"]) == 64
 
 
+def test_without_the_feature_cache_the_results_are_the_same(images, serial, tmp_path) -> None:
+    folder, names = images
+    pairs = good_pairs(names)[:3]
+    s = batch.run(pairs, folder, tmp_path, workers=1, cache=False, progress=False, **OPTIONS)
+    assert (s.matched, s.failed) == (3, 0), s
+    assert not (tmp_path / "cache").exists()
+    assert_equals_serial(tmp_path, serial, pairs)
+
+
 def test_bad_pairs_are_recorded_and_the_batch_goes_on(images, serial, tmp_path) -> None:
     folder, names = images
     pairs = [*good_pairs(names)[:3], (names[0], "broken.png"), ("missing.png", names[1])]

@@ -285,7 +285,12 @@ def run(
     if cache_dir is not None:
         cache_dir.mkdir(exist_ok=True)
     config: dict[str, Any] = {
-        "key": digest(options_key, os.fspath(image_dir), os.fspath(cache_dir), threads_per_worker),
+        "key": digest(
+            options_key,
+            os.fspath(image_dir),
+            os.fspath(cache_dir) if cache_dir else "",
+            threads_per_worker,
+        ),
         "pipeline": {k: v for k, v in pipeline_kwargs.items() if k != "shape_model"},
         "models_dir": None if models_dir is None else os.fspath(models_dir),
         "threads": threads_per_worker,
