@@ -92,6 +92,8 @@ def test_python_and_cli_defaults_are_the_rust_crates():
         "dense_matches",
         "refine_affine",
         "views",
+        "view_relative_budget",
+        "guided_matching",
         "seed",
         "homography_threshold",
         "fundamental_threshold",
@@ -103,6 +105,8 @@ def test_python_and_cli_defaults_are_the_rust_crates():
     assert init["refine_affine"].default == d["refine_affine"]
     assert init["seed"].default == d["seed"]
     assert init["views"].default == d["views"]
+    assert init["view_relative_budget"].default == d["view_relative_budget"]
+    assert init["guided_matching"].default == d["guided_matching"]
     for method, key in [
         (affcorr.Pipeline.homography, "homography_threshold"),
         (affcorr.Pipeline.fundamental, "fundamental_threshold"),
