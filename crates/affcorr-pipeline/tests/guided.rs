@@ -8,39 +8,12 @@
 
 mod common;
 
-use affcorr_geom::{Mat3, Vec3};
+use affcorr_geom::Mat3;
 use affcorr_image::GrayImage;
-use affcorr_pipeline::{GrowOptions, Matcher, Pipeline, ViewMode, ViewOptions};
+use affcorr_pipeline::{GrowOptions, Pipeline, ViewMode};
 
 fn pipeline(guided: bool) -> Pipeline {
-    common::init();
-    Pipeline::builder()
-        .matcher(Matcher::XFeatLighterGlue)
-        .max_keypoints(1024)
-        .models_dir(common::models_dir())
-        .threads(2)
-        .views(ViewOptions {
-            mode: ViewMode::Off,
-            ..Default::default()
-        })
-        .guided_matching(guided.then(GrowOptions::default))
-        .build()
-        .unwrap()
-}
-
-/// |H(x1) − x2| and ‖A − ∂H/∂x(x1)‖_F of an AC row.
-fn errors(h: &Mat3, row: &[f64; 8]) -> (f64, f64) {
-    let p = h * Vec3::new(row[0], row[1], 1.0);
-    let (x2, w) = ([p[0] / p[2], p[1] / p[2]], p[2]);
-    let mut a_err = 0.0;
-    for r in 0..2 {
-        for c in 0..2 {
-            let gt = (h[(r, c)] - x2[r] * h[(2, c)]) / w;
-            a_err += (row[4 + 2 * r + c] - gt).powi(2);
-        }
-    }
-    let d = ((x2[0] - row[2]).powi(2) + (x2[1] - row[3]).powi(2)).sqrt();
-    (d, a_err.sqrt())
+    common::graffiti_pipeline(ViewMode::Off, guided)
 }
 
 #[test]
@@ -57,7 +30,8 @@ fn grown_matches_agree_with_the_plane() {
     assert_eq!(&guided.corrs[..n], &plain.corrs[..]);
     assert!(guided.timings.guided > std::time::Duration::ZERO);
     let grown = &guided.corrs[n..];
-    let (mut point, mut affine): (Vec<f64>, Vec<f64>) = grown.iter().map(|r| errors(&h, r)).unzip();
+    let (mut point, mut affine): (Vec<f64>, Vec<f64>) =
+        grown.iter().map(|r| common::plane_errors(&h, r)).unzip();
     point.sort_by(f64::total_cmp);
     affine.sort_by(f64::total_cmp);
     let within = point.iter().filter(|d| **d < 3.0).count() as f64 / point.len().max(1) as f64;
@@ -71,7 +45,11 @@ fn grown_matches_agree_with_the_plane() {
         guided.timings.guided
     );
     let pct = |v: &[f64], q: f64| v[((v.len() as f64 * q) as usize).min(v.len() - 1)];
-    let mut plain_err: Vec<f64> = plain.corrs.iter().map(|r| errors(&h, r).0).collect();
+    let mut plain_err: Vec<f64> = plain
+        .corrs
+        .iter()
+        .map(|r| common::plane_errors(&h, r).0)
+        .collect();
     plain_err.sort_by(f64::total_cmp);
     let plain_within = plain_err.iter().filter(|d| **d < 3.0).count() as f64 / n as f64;
     eprintln!(

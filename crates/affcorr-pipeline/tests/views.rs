@@ -10,7 +10,7 @@ mod common;
 
 use affcorr_geom::{Mat3, Vec3};
 use affcorr_image::{AffineWarp, GrayImage, warp_image};
-use affcorr_pipeline::{Geometry, Matcher, Pipeline, ViewMode, ViewOptions, ViewSpec};
+use affcorr_pipeline::{Geometry, Pipeline, ViewMode, ViewSpec};
 
 fn graffiti() -> (GrayImage, GrayImage, Mat3) {
     let dir = common::root().join("data/graffiti");
@@ -22,18 +22,7 @@ fn graffiti() -> (GrayImage, GrayImage, Mat3) {
 }
 
 fn pipeline(mode: ViewMode) -> Pipeline {
-    common::init();
-    Pipeline::builder()
-        .matcher(Matcher::XFeatLighterGlue)
-        .max_keypoints(1024)
-        .models_dir(common::models_dir())
-        .threads(2)
-        .views(ViewOptions {
-            mode,
-            ..Default::default()
-        })
-        .build()
-        .unwrap()
+    common::graffiti_pipeline(mode, false)
 }
 
 fn warp_matrix(w: &AffineWarp) -> Mat3 {
@@ -59,20 +48,6 @@ fn corner_error(h: &Mat3, gt: &Mat3, w: usize, hgt: usize) -> f64 {
         / 4.0
 }
 
-/// ‖A − A_gt‖_F with A_gt = ∂H(x)/∂x at x1.
-fn affine_error(h: &Mat3, row: &[f64; 8]) -> f64 {
-    let p = h * Vec3::new(row[0], row[1], 1.0);
-    let (x2, w) = ([p[0] / p[2], p[1] / p[2]], p[2]);
-    let mut err = 0.0;
-    for r in 0..2 {
-        for c in 0..2 {
-            let gt = (h[(r, c)] - x2[r] * h[(2, c)]) / w;
-            err += (row[4 + 2 * r + c] - gt).powi(2);
-        }
-    }
-    err.sqrt()
-}
-
 /// Runs the pair with and without views and checks the cascade's result against `gt`.
 fn check(a: &GrayImage, b: &GrayImage, gt: &Mat3, what: &str) {
     let opts = Geometry::Homography.default_options();
@@ -92,7 +67,7 @@ fn check(a: &GrayImage, b: &GrayImage, gt: &Mat3, what: &str) {
         .iter()
         .zip(&est.estimate.inliers)
         .filter(|(_, i)| **i)
-        .map(|(r, _)| affine_error(gt, r))
+        .map(|(r, _)| common::plane_errors(gt, r).1)
         .collect();
     aff.sort_by(f64::total_cmp);
     let median = aff[aff.len() / 2];
