@@ -97,8 +97,8 @@ def peak_rss(output: Path) -> float:
 
 
 @contextlib.contextmanager
-def ray_cluster():
-    """`ray start --head` (no CPUs) and two 1-CPU nodes on 127.0.0.1 (stopped afterwards)."""
+def ray_cluster(workers: int = 2):
+    """`ray start --head` (no CPUs) and ``workers`` 1-CPU nodes on 127.0.0.1, stopped after."""
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
@@ -124,7 +124,7 @@ def ray_cluster():
 
         ray.init(address=f"127.0.0.1:{port}", log_to_driver=False)
         # One node at a time: two raylets starting together can pick the same free port.
-        for cpus in (1, 2):
+        for cpus in range(1, workers + 1):
             nodes.append(node(f"--address=127.0.0.1:{port}", "--num-cpus=1"))
             for _ in range(240):
                 if ray.cluster_resources().get("CPU", 0) >= cpus:
