@@ -52,8 +52,9 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
                                       hypothesis on all data
   ``affine_weight``      ``None``     weight (px^2) of the affine residual in scoring (``(N, 8)``
                                       only; 0: points only); ``None``: 50 for F and the relative
-                                      pose on ACs (points-only scoring again when it costs over
-                                      20% of the inliers: A too poor), 0 otherwise (H, points)
+                                      pose on ACs (points again, sampled and scored, when it
+                                      costs over 20% of the inliers or a points model explains
+                                      1.25x more: A too poor; docs/estimation.md), 0 otherwise
   ``affine_refinement``  ``"final"``  where the affine Sampson terms of ACs enter the fits of F
                                       and the relative pose (``(N, 8)`` only): ``"off"``,
                                       ``"final"`` (the final refinement) or ``"all"`` (local

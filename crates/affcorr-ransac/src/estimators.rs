@@ -81,13 +81,17 @@ pub struct EstimatorOptions {
 /// at a cost of ≤ 1.3× where A is noisy (10%); H gains nothing from it (up to 1.45× worse).
 pub const DEFAULT_AFFINE_WEIGHT: f64 = 50.0;
 
-/// The default affine term gives way to points when it costs too many inliers: if the
-/// default run's inliers are fewer than this share of the data its model explains by their
-/// points alone, A is too poor to score with (learned ACs can be off by 30%, where λ·SD_A alone
-/// is ~4 threshold²: tests/synthetic.rs) and the estimate is run again with points-only scoring
-/// (the affine refinement still weighs A by its own estimated noise scale). An uncapped term
-/// is what removes the planar and narrow-baseline ambiguities (a cap at threshold²/4 lost them:
-/// benches/results/scene_families.md).
+/// The default affine term gives way to points when it costs too many inliers. The
+/// affine-scored model must explain, by its points alone, at least this share of the data that
+/// the best points-scored model explains, and its own (affine) inliers must be at least this
+/// share of what it explains by points. Either failure means that A is too poor to score with:
+/// learned ACs can be off by 30%, where λ·SD_A alone is ~4 threshold² (tests/synthetic.rs), and
+/// on repetitive texture (a chessboard) wrong A of a consistent subset let a model with half the
+/// true inliers win the affine score (benches/results/scene_families.real.md). The estimate is
+/// then the points-scored one (whose final refinement still weighs A by its own estimated noise
+/// scale). An uncapped term is what removes the planar and narrow-baseline ambiguities (a cap at
+/// threshold²/4 lost them: benches/results/scene_families.md), and there both models explain
+/// about as many points, so the affine one is kept.
 pub const DEFAULT_AFFINE_FALLBACK: f64 = 0.8;
 
 /// The affine scoring weight of an epipolar problem (F, relative pose) under `opts` on `data`,
@@ -100,15 +104,67 @@ fn epipolar_affine_weight(data: &Correspondences, opts: &EstimatorOptions) -> (f
     }
 }
 
-/// Whether the default affine term cost too many inliers under `est`'s model: fewer than
-/// [`DEFAULT_AFFINE_FALLBACK`] × the data below the threshold on `points` (the same problem
-/// scored on points only).
-fn affine_too_poor<P: Problem>(points: &P, est: &Estimate<P::Model>, threshold: f64) -> bool {
-    let mut r = vec![0.0; points.len()];
-    points.residuals(&est.model, 0, &mut r);
+/// The number of data whose residual under `model` in `problem` is below `threshold`.
+fn explained<P: Problem>(problem: &P, model: &P::Model, threshold: f64) -> usize {
+    let mut r = vec![0.0; problem.len()];
+    problem.residuals(model, 0, &mut r);
     let t2 = threshold * threshold;
-    let explained = r.iter().filter(|&&v| v < t2).count();
-    (est.num_inliers as f64) < DEFAULT_AFFINE_FALLBACK * explained as f64
+    r.iter().filter(|&&v| v < t2).count()
+}
+
+/// Most iterations of the probe of [`points_fallback`].
+const PROBE_ITERATIONS: usize = 200;
+
+/// Confidence with which the probe of [`points_fallback`] draws an all-inlier minimal sample
+/// of a points model that would make the affine estimate lose.
+const PROBE_CONFIDENCE: f64 = 0.99;
+
+/// The points-scored estimate to return instead of the default affine-scored one `affine`
+/// ([`DEFAULT_AFFINE_FALLBACK`]), or `None` to keep it. `points` is the same problem sampled and
+/// scored by points only.
+///
+/// Whether a points model explains far more is asked of a probe: minimal point samples, no
+/// local optimisation, no refinement (its count is a lower bound of a full run's). It only looks
+/// for a model that beats the affine one by 1/[`DEFAULT_AFFINE_FALLBACK`], i.e. with an inlier
+/// ratio w ≥ (explained by the affine model's points) / (0.8 N): k = log(1 − 0.99) / log(1 − wᵐ)
+/// draws find one with 99% confidence (46 for E at w = 0.625; at most [`PROBE_ITERATIONS`]).
+/// Only when the affine estimate loses is the full run made, with point samples too: what the
+/// same data as points would give, plus the affine terms of the final refinement.
+///
+/// The probe samples points because poor A is the case in question: 2-AC hypotheses of poor A
+/// find a consistent decoy instead (tests/synthetic.rs), or half the true inliers on repetitive
+/// texture unless local optimisation, which costs as much as the run, repairs them. A points run
+/// that finds nothing keeps the affine estimate.
+fn points_fallback<P: Problem>(
+    points: &P,
+    affine: &Estimate<P::Model>,
+    opts: &EstimatorOptions,
+) -> Option<Estimate<P::Model>> {
+    let threshold = opts.ransac.threshold;
+    let by_points = explained(points, &affine.model, threshold) as f64;
+    let too_poor = (affine.num_inliers as f64) < DEFAULT_AFFINE_FALLBACK * by_points || {
+        let mut probe = opts.clone();
+        probe.ransac.final_refinement = false;
+        probe.ransac.local_optimization = false;
+        let w = (by_points / (DEFAULT_AFFINE_FALLBACK * points.len() as f64)).min(1.0);
+        let p_good = w.powi(points.sample_size() as i32);
+        let draws = if p_good >= 1.0 {
+            1
+        } else if p_good > 0.0 {
+            ((1.0 - PROBE_CONFIDENCE).ln() / (1.0 - p_good).ln()).ceil() as usize
+        } else {
+            PROBE_ITERATIONS
+        };
+        probe.ransac.max_iterations = probe.ransac.max_iterations.min(PROBE_ITERATIONS).min(draws);
+        probe.ransac.min_iterations = probe.ransac.min_iterations.min(probe.ransac.max_iterations);
+        run(points, &probe, ScoringKind::Msac)
+            .is_ok_and(|p| by_points < DEFAULT_AFFINE_FALLBACK * p.num_inliers as f64)
+    };
+    if too_poor {
+        run(points, opts, ScoringKind::Msac).ok()
+    } else {
+        None
+    }
 }
 
 fn sample_kind(data: &Correspondences, opts: &EstimatorOptions) -> Result<SampleKind> {
@@ -228,17 +284,15 @@ pub fn estimate_fundamental(
 ) -> Result<Estimate<Mat3>> {
     let kind = sample_kind(data, opts)?;
     let (weight, default) = epipolar_affine_weight(data, opts);
-    let problem = |w| {
+    let problem = |w, kind| {
         FundamentalProblem::new(data, kind, w, opts.ransac.threshold)
             .with_affine_confidence(opts.affine_confidence.as_deref())
     };
-    let est = run(&problem(weight), opts, ScoringKind::Msac);
-    match est {
-        Ok(e) if default && affine_too_poor(&problem(0.0), &e, opts.ransac.threshold) => {
-            run(&problem(0.0), opts, ScoringKind::Msac)
-        }
-        other => other,
+    let est = run(&problem(weight, kind), opts, ScoringKind::Msac)?;
+    if !default {
+        return Ok(est);
     }
+    Ok(points_fallback(&problem(0.0, SampleKind::Points), &est, opts).unwrap_or(est))
 }
 
 /// Robust relative pose X2 = R X1 + t (|t| = 1) from pixel correspondences and intrinsics.
@@ -254,7 +308,7 @@ pub fn estimate_relative_pose(
     let (weight, default) = epipolar_affine_weight(data, opts);
     // Cheirality is checked wherever a datum can count as an inlier: below the widest threshold
     // of local optimisation's schedule.
-    let make = |w| {
+    let make = |w, kind| {
         RelativePoseProblem::new(
             data,
             *k1,
@@ -265,12 +319,12 @@ pub fn estimate_relative_pose(
         )
         .with_affine_confidence(opts.affine_confidence.as_deref())
     };
-    let mut problem = make(weight);
+    let mut problem = make(weight, kind);
     let mut est = run(&problem, opts, ScoringKind::Msac)?;
     if default {
-        let points = make(0.0);
-        if affine_too_poor(&points, &est, opts.ransac.threshold) {
-            est = run(&points, opts, ScoringKind::Msac)?;
+        let points = make(0.0, SampleKind::Points);
+        if let Some(p) = points_fallback(&points, &est, opts) {
+            est = p;
             problem = points;
         }
     }

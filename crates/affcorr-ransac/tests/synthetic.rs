@@ -111,7 +111,12 @@ fn noisy_affine_parts_make_ac_sampling_search_longer_and_still_find_the_pose() {
         let scene = PlaneScene::random(&mut rng);
         let exact = make_data(&mut rng, &scene, 3, 1000, 0.3, 0.5, 0.02);
         let noisy = make_data(&mut rng, &scene, 3, 1000, 0.3, 0.5, 0.3);
-        let opts = options(1.5, SampleKind::Affine, trial);
+        // Points-only scoring: the default would give way to point samples on the noisy ACs
+        // (DEFAULT_AFFINE_FALLBACK), and this test is about the 2-AC search.
+        let opts = EstimatorOptions {
+            affine_weight: Some(0.0),
+            ..options(1.5, SampleKind::Affine, trial)
+        };
         it_exact += estimate_relative_pose(&exact.data, &scene.k1, &scene.k2, &opts)
             .unwrap()
             .iterations;
@@ -331,4 +336,66 @@ fn graph_cut_lo_is_deterministic() {
     assert_eq!(a.model, b.model);
     assert_eq!(a.inliers, b.inliers);
     assert!(a.lo_runs >= 1);
+}
+
+/// Rows of `a` then `b`, as one data set.
+fn concat(a: &Correspondences, b: &Correspondences) -> Correspondences {
+    Correspondences {
+        x1: [&a.x1[..], &b.x1[..]].concat(),
+        x2: [&a.x2[..], &b.x2[..]].concat(),
+        a: [&a.a[..], &b.a[..]].concat(),
+    }
+}
+
+#[test]
+fn poor_acs_of_the_true_model_never_lose_to_a_consistent_decoy() {
+    // Repetitive texture gives both: the true motion's ACs with wrong A, and a smaller set of
+    // matches consistent with another motion, A included. The affine score prefers the decoy
+    // (its own inliers are all it explains); the default must see that the points of the true
+    // model explain twice as many and return the points-scored estimate.
+    let mut rng = Pcg64::seed_from_u64(22);
+    let mut decoys = 0;
+    for trial in 0..4 {
+        let truth = PlaneScene::random(&mut rng);
+        let mut decoy_scene = PlaneScene::random(&mut rng);
+        (decoy_scene.k1, decoy_scene.k2) = (truth.k1, truth.k2);
+        let poor = make_data(&mut rng, &truth, 3, 600, 0.0, 0.5, 1.0);
+        let decoy = make_data(&mut rng, &decoy_scene, 3, 300, 0.0, 0.5, 0.0);
+        let data = concat(&poor.data, &decoy.data);
+        let opts = EstimatorOptions {
+            ransac: RansacOptions {
+                threshold: 1.5,
+                seed: trial,
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let scored = EstimatorOptions {
+            affine_weight: Some(affcorr_ransac::DEFAULT_AFFINE_WEIGHT),
+            ..opts.clone()
+        };
+        let pose_error = |r: &affcorr_geom::Mat3| angle_deg(&(r.transpose() * truth.pose.r));
+        // The premise (counted below): affine scoring alone picks the decoy.
+        let e = estimate_relative_pose(&data, &truth.k1, &truth.k2, &scored).unwrap();
+        decoys += usize::from(pose_error(&e.model.pose.r) > 5.0);
+        let e = estimate_relative_pose(&data, &truth.k1, &truth.k2, &opts).unwrap();
+        let r_err = pose_error(&e.model.pose.r);
+        assert!(r_err < 0.5, "trial {trial}: pose {r_err}°");
+        assert!(
+            e.num_inliers >= 550,
+            "trial {trial}: {} inliers",
+            e.num_inliers
+        );
+        // F: the same rule.
+        let f = estimate_fundamental(&data, &opts).unwrap();
+        let found = f.inliers[..600].iter().filter(|&&v| v).count();
+        assert!(
+            found >= 550,
+            "trial {trial}: F kept {found} of the true model's 600"
+        );
+    }
+    assert!(
+        decoys >= 2,
+        "affine scoring chose the decoy in only {decoys} of 4 trials"
+    );
 }
