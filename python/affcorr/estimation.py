@@ -55,12 +55,13 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
                                       pose on ACs (points again, sampled and scored, when it
                                       costs over 20% of the inliers or a points model explains
                                       1.25x more: A too poor; docs/estimation.md), 0 otherwise
-  ``affine_refinement``  ``"final"``  where the affine Sampson terms of ACs enter the fits of F
+  ``affine_refinement``  ``"final"``  where the affine terms of ACs enter the fits of H, F
                                       and the relative pose (``(N, 8)`` only): ``"off"``,
                                       ``"final"`` (the final refinement) or ``"all"`` (local
                                       optimisation too); the noise scale of A is estimated
                                       from the inliers and a poor A is down-weighted by a
-                                      Cauchy loss (docs/estimation.md); H uses points only
+                                      Cauchy loss (docs/estimation.md); H: A − A_H(x1) in its
+                                      final refinement
   ``affine_confidence``  ``None``     ``(N,)`` per-AC confidence in ``[0, 1]`` scaling its
                                       affine terms (scoring with ``affine_weight``, and the
                                       refinements); 0 makes an AC a point; ``(N, 8)`` only; in

@@ -45,8 +45,8 @@ pub enum LoKind {
     GraphCut,
 }
 
-/// Where the affine Sampson terms of ACs enter the least-squares fits of a model (F and the
-/// relative pose from AC data; H and point data ignore it). Each AC then adds its two affine residuals, whitened by the noise
+/// Where the affine terms of ACs enter the least-squares fits of a model (AC data; point data
+/// ignore it; H refines only at the end, so `All` is `Final` there). Each AC then adds its two affine residuals, whitened by the noise
 /// scale of A that the fit estimates from its inliers (the ratio of the median point to the
 /// median affine Sampson distance), weighted by the AC's confidence and under a Cauchy loss so
 /// that a poor A is down-weighted (docs/estimation.md).

@@ -10,7 +10,7 @@
 //!   by A instead of A_H.
 
 use super::simd::{BLOCK, dispatch, dot};
-use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below};
+use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, homography_affine};
 use crate::loss::Loss;
 use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Mat9, Vec9, levenberg_marquardt};
@@ -40,8 +40,8 @@ impl<'a> HomographyProblem<'a> {
         }
     }
 
-    /// Weighs each AC's affine term of scoring by `confidence` (one value in [0, 1] per datum,
-    /// checked by the estimators). The homography's refinements use points only.
+    /// Weighs each AC's affine terms (scoring and the affine refinement) by `confidence` (one
+    /// value in [0, 1] per datum, checked by the estimators).
     pub fn with_affine_confidence(mut self, confidence: Option<&'a [f64]>) -> Self {
         self.confidence = confidence;
         self
@@ -171,7 +171,9 @@ impl Problem for HomographyProblem<'_> {
         }
     }
 
-    /// Levenberg–Marquardt of the transfer error on the unit sphere of H (8 degrees of freedom).
+    /// Levenberg–Marquardt of the transfer error on the unit sphere of H (8 degrees of freedom);
+    /// with `options.affine` and ACs, plus their affine terms (`homography_affine`), λ
+    /// re-estimated at each round's result.
     fn refine(
         &self,
         model: &Mat3,
@@ -179,8 +181,30 @@ impl Problem for HomographyProblem<'_> {
         loss: &Loss,
         options: &LmOptions,
     ) -> Option<Mat3> {
-        let h = model / model.norm();
-        Some(levenberg_marquardt(self, &h, inliers, loss, options).0)
+        let mut h = model / model.norm();
+        if !(options.affine && self.data.has_affine()) {
+            return Some(levenberg_marquardt(self, &h, inliers, loss, options).0);
+        }
+        h = levenberg_marquardt(self, &h, inliers, loss, options).0;
+        let mut lambda: Option<f64> = None;
+        for _ in 0..homography_affine::AFFINE_ROUNDS {
+            let Some(terms) =
+                homography_affine::affine_terms(self.data, &h, inliers, self.confidence)
+            else {
+                break;
+            };
+            if lambda.is_some_and(|l| (0.8..=1.25).contains(&(terms.lambda / l))) {
+                break;
+            }
+            lambda = Some(terms.lambda);
+            let fit = homography_affine::HomographyAffineFit {
+                problem: self,
+                data: self.data,
+                terms,
+            };
+            h = levenberg_marquardt(&fit, &h, inliers, loss, options).0;
+        }
+        Some(h)
     }
 
     /// The normalised DLT on the inliers is close to the transfer-error optimum: LM inside LO
@@ -253,7 +277,7 @@ impl HomographyProblem<'_> {
 
 /// An orthonormal basis of the tangent space of the unit sphere at vec(H): the last 8 columns of
 /// the Householder reflection that maps vec(H) to ±e₁.
-fn tangent_basis(h: &Mat3) -> [Vec9; 8] {
+pub(crate) fn tangent_basis(h: &Mat3) -> [Vec9; 8] {
     let v = Vec9::from_iterator((0..9).map(|k| h[(k / 3, k % 3)]));
     let sign = if v[0] >= 0.0 { 1.0 } else { -1.0 };
     let mut u = v;

@@ -6,6 +6,7 @@
 mod epipolar_lm;
 pub mod fundamental;
 pub mod homography;
+mod homography_affine;
 pub mod relpose;
 mod simd;
 

@@ -1,0 +1,328 @@
+//! The affine terms of the homography's final refinement (`affine_refinement`).
+//!
+//! An AC (x1, x2, A) of a plane satisfies A = A_H(x1), the Jacobian of x ↦ π(H x̃) at x1
+//! (docs/design.md §2). With p = (x, y, 1) = x̃1, w = h₃·p and q_r = (h_r·p)/w (r < 2, the
+//! projected point),
+//!
+//!   A_H,rc = (h_rc − q_r h_2c) / w,
+//!   ∂A_H,rc/∂h_rk = δ_kc / w − p_k h_2c / w²,
+//!   ∂A_H,rc/∂h_2k = −(p_k / w)(A_H,rc − q_r h_2c / w) − q_r δ_kc / w,
+//!
+//! and 0 for the other row. Each AC adds the four residuals d = A_H(x1) − A, whitened by λ
+//! (px² per unit² of A: the ratio of the point to the affine noise variance, estimated from the
+//! inliers as the ratio of the medians of the squared components) and weighted by the AC's
+//! confidence c_i: cost Σ_i c_i Σ_k ρ_A(λ d_k²), ρ_A the Cauchy loss at 3σ̂ of the point
+//! residuals, so that an AC whose A is off pulls little. This is the homography counterpart of
+//! `epipolar_lm`'s affine Sampson terms.
+
+use super::Correspondences;
+use super::homography::HomographyProblem;
+use crate::loss::Loss;
+use crate::refine::{LeastSquares, Mat9, Vec9};
+use affcorr_geom::{Mat2, Mat3, Vec2};
+
+/// The median of χ²₁.
+const CHI2_1_MEDIAN: f64 = 0.454_936_423_119_572_8;
+
+/// Largest λ: A exact to 0.5% at 0.5 px of point noise. With exact A ("A 0%" of
+/// benches/results/scene_families.md) the λ of the data is unbounded, but H's Jacobian at a
+/// noisy x1 is not that A; the cap of epipolar_lm (1e6) made that family 1.14× worse than
+/// points, 1e4 1.07× (and better than points in 11 of the other 14 families).
+const MAX_AFFINE_SCALE: f64 = 1e4;
+
+/// Most rounds of estimate-λ-then-refine: λ is first estimated at the points-only model.
+pub(crate) const AFFINE_ROUNDS: usize = 3;
+
+/// A_H(x1) − A and its gradient over the 9 entries of H (row-major), for each of the four
+/// entries of A (row-major).
+pub(crate) fn affine_residuals_and_gradients(
+    h: &Mat3,
+    x1: &Vec2,
+    a: &Mat2,
+) -> [(f64, [f64; 9]); 4] {
+    let p = [x1.x, x1.y, 1.0];
+    let w = h[(2, 0)] * p[0] + h[(2, 1)] * p[1] + h[(2, 2)];
+    let q = |r: usize| (h[(r, 0)] * p[0] + h[(r, 1)] * p[1] + h[(r, 2)]) / w;
+    std::array::from_fn(|e| {
+        let (r, c) = (e / 2, e % 2);
+        let qr = q(r);
+        let a_h = (h[(r, c)] - qr * h[(2, c)]) / w;
+        let mut g = [0.0; 9];
+        for k in 0..3 {
+            let delta = if k == c { 1.0 } else { 0.0 };
+            g[3 * r + k] = delta / w - p[k] * h[(2, c)] / (w * w);
+            g[6 + k] = -(p[k] / w) * (a_h - qr * h[(2, c)] / w) - qr * delta / w;
+        }
+        (a_h - a[(r, c)], g)
+    })
+}
+
+/// The affine part of a homography refinement.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct HomographyAffineTerms<'a> {
+    /// λ: px² per unit² of A.
+    pub lambda: f64,
+    /// Per-AC confidence c_i in [0, 1] (all 1 when `None`).
+    pub confidence: Option<&'a [f64]>,
+    /// ρ_A, of λ d_k² (px²).
+    pub loss: Loss,
+}
+
+/// The affine terms at `h` on `inliers`, or `None` (points only) without A or when fewer than
+/// 5 inliers have a confidence above 0.
+pub(crate) fn affine_terms<'c>(
+    data: &Correspondences,
+    h: &Mat3,
+    inliers: &[usize],
+    confidence: Option<&'c [f64]>,
+) -> Option<HomographyAffineTerms<'c>> {
+    if !data.has_affine() {
+        return None;
+    }
+    let (mut pts, mut aff) = (Vec::new(), Vec::new());
+    for &i in inliers {
+        if confidence.is_some_and(|c| c[i] <= 0.0) {
+            continue;
+        }
+        let (x1, x2) = (data.x1[i], data.x2[i]);
+        let wz = h[(2, 0)] * x1.x + h[(2, 1)] * x1.y + h[(2, 2)];
+        let u = (h[(0, 0)] * x1.x + h[(0, 1)] * x1.y + h[(0, 2)]) / wz;
+        let v = (h[(1, 0)] * x1.x + h[(1, 1)] * x1.y + h[(1, 2)]) / wz;
+        pts.extend([(u - x2.x).powi(2), (v - x2.y).powi(2)]);
+        for (d, _) in affine_residuals_and_gradients(h, &x1, &data.a[i]) {
+            aff.push(d * d);
+        }
+    }
+    if pts.len() < 10 {
+        return None;
+    }
+    let median = |v: &mut Vec<f64>| {
+        let k = v.len() / 2;
+        *v.select_nth_unstable_by(k, f64::total_cmp).1
+    };
+    let (mp, ma) = (median(&mut pts), median(&mut aff));
+    if !(mp.is_finite() && ma.is_finite()) || mp <= 0.0 {
+        return None;
+    }
+    let lambda = if ma * MAX_AFFINE_SCALE <= mp {
+        MAX_AFFINE_SCALE
+    } else {
+        mp / ma
+    };
+    Some(HomographyAffineTerms {
+        lambda,
+        confidence,
+        loss: Loss::Cauchy {
+            scale_sq: (9.0 * mp / CHI2_1_MEDIAN).max(1e-12),
+        },
+    })
+}
+
+/// The homography's least squares plus the affine terms.
+pub(crate) struct HomographyAffineFit<'p, 'a> {
+    pub problem: &'p HomographyProblem<'a>,
+    pub data: &'a Correspondences,
+    pub terms: HomographyAffineTerms<'a>,
+}
+
+impl HomographyAffineFit<'_, '_> {
+    fn confidence(&self, i: usize) -> f64 {
+        self.terms.confidence.map_or(1.0, |c| c[i])
+    }
+}
+
+impl LeastSquares for HomographyAffineFit<'_, '_> {
+    type Model = Mat3;
+
+    fn dof(&self) -> usize {
+        8
+    }
+
+    fn cost(&self, h: &Mat3, indices: &[usize], loss: &Loss) -> f64 {
+        let mut cost = self.problem.cost(h, indices, loss);
+        for &i in indices {
+            let c = self.confidence(i);
+            if c <= 0.0 {
+                continue;
+            }
+            for (d, _) in affine_residuals_and_gradients(h, &self.data.x1[i], &self.data.a[i]) {
+                cost += c * self.terms.loss.cost(self.terms.lambda * d * d);
+            }
+        }
+        cost
+    }
+
+    fn normal_equations(
+        &self,
+        h: &Mat3,
+        indices: &[usize],
+        loss: &Loss,
+        jtj: &mut Mat9,
+        jtr: &mut Vec9,
+    ) -> f64 {
+        let mut cost = self.problem.normal_equations(h, indices, loss, jtj, jtr);
+        let (mut a, mut g) = (Mat9::zeros(), Vec9::zeros());
+        for &i in indices {
+            let c = self.confidence(i);
+            if c <= 0.0 {
+                continue;
+            }
+            for (d, grad) in affine_residuals_and_gradients(h, &self.data.x1[i], &self.data.a[i]) {
+                let (rho, w) = self.terms.loss.cost_and_weight(self.terms.lambda * d * d);
+                cost += c * rho;
+                let w = c * w * self.terms.lambda;
+                let grad = Vec9::from_column_slice(&grad);
+                a += grad * grad.transpose() * w;
+                g += grad * (w * d);
+            }
+        }
+        let basis = super::homography::tangent_basis(h);
+        for r in 0..8 {
+            let ab = a * basis[r];
+            jtr[r] += basis[r].dot(&g);
+            for c in 0..8 {
+                jtj[(r, c)] += basis[c].dot(&ab);
+            }
+        }
+        cost
+    }
+
+    fn retract(&self, h: &Mat3, delta: &Vec9) -> Mat3 {
+        self.problem.retract(h, delta)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::problem::Problem;
+    use crate::problems::SampleKind;
+    use crate::refine::LmOptions;
+    use affcorr_geom::homography::ac_from_homography;
+    use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
+    use rand::SeedableRng;
+
+    fn plane_data(seed: u64, n: usize, px: f64, rel: f64) -> (PlaneScene, Correspondences) {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+        let scene = PlaneScene::random(&mut rng);
+        let noise = NoiseModel {
+            planes: 1,
+            outlier_ratio: 0.0,
+            pixel_noise: px,
+            affine_noise: rel,
+        };
+        let (acs, _) = noisy_correspondences(&mut rng, &scene, n, &noise);
+        let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
+        (scene, Correspondences::from_ac_rows(&rows).unwrap())
+    }
+
+    #[test]
+    fn normal_equations_are_half_the_gradient_of_the_cost() {
+        let (scene, data) = plane_data(3, 60, 1.0, 0.05);
+        let problem = HomographyProblem::new(&data, SampleKind::Affine, 0.0);
+        let h = scene.homography() / scene.homography().norm();
+        let idx: Vec<usize> = (0..60).collect();
+        let terms = affine_terms(&data, &h, &idx, None).unwrap();
+        let fit = HomographyAffineFit {
+            problem: &problem,
+            data: &data,
+            terms,
+        };
+        let loss = Loss::Cauchy { scale_sq: 4.0 };
+        let (mut jtj, mut jtr) = (Mat9::zeros(), Vec9::zeros());
+        let cost = fit.normal_equations(&h, &idx, &loss, &mut jtj, &mut jtr);
+        assert!((cost - fit.cost(&h, &idx, &loss)).abs() < 1e-9 * cost);
+        for k in 0..8 {
+            let t = 1e-11;
+            let step = |s: f64| {
+                let mut d = Vec9::zeros();
+                d[k] = s;
+                fit.cost(&fit.retract(&h, &d), &idx, &loss)
+            };
+            let fd = (step(t) - step(-t)) / (2.0 * t);
+            assert!(
+                (fd - 2.0 * jtr[k]).abs() <= 1e-4 * fd.abs().max(1.0),
+                "direction {k}: 2 Jᵀr {} vs central difference {fd}",
+                2.0 * jtr[k]
+            );
+        }
+    }
+
+    #[test]
+    fn accurate_acs_make_the_refined_homography_more_accurate_than_points() {
+        // 1 px on the points, 1% on A, 20 matches: A adds to what the points know about H's
+        // local shape (over a 300 px spread, 20 points at 1 px fix the Jacobian to ~0.3%), so
+        // the fit with the affine terms is closer to the truth in every scene (by 3–20%).
+        let (mut better, mut log_ratio, trials) = (0, 0.0, 6_usize);
+        for seed in 0..trials as u64 {
+            let (scene, data) = plane_data(100 + seed, 20, 1.0, 0.01);
+            let truth = scene.homography();
+            let problem = HomographyProblem::new(&data, SampleKind::Affine, 0.0);
+            let all: Vec<usize> = (0..20).collect();
+            let start = problem.fit_nonminimal(&all, None).unwrap();
+            let refine = |affine| {
+                let options = LmOptions {
+                    affine,
+                    ..Default::default()
+                };
+                problem
+                    .refine(&start, &all, &Loss::Squared, &options)
+                    .unwrap()
+            };
+            let error = |h: &Mat3| {
+                // Mean transfer distance to the truth over the data's points.
+                let mut e = 0.0;
+                for x in &data.x1 {
+                    let p = |m: &Mat3| {
+                        let v = m * affcorr_geom::Vec3::new(x.x, x.y, 1.0);
+                        Vec2::new(v.x / v.z, v.y / v.z)
+                    };
+                    e += (p(h) - p(&truth)).norm();
+                }
+                e / data.len() as f64
+            };
+            let (e_points, e_affine) = (error(&refine(false)), error(&refine(true)));
+            better += usize::from(e_affine < e_points);
+            log_ratio += (e_affine / e_points).ln();
+        }
+        let mean_ratio = (log_ratio / trials as f64).exp();
+        assert_eq!(
+            better, trials,
+            "the affine terms helped in {better} of {trials} scenes"
+        );
+        assert!(
+            mean_ratio < 0.95,
+            "mean error ratio affine / points {mean_ratio}"
+        );
+    }
+
+    #[test]
+    fn gradients_match_central_differences_and_the_residual_vanishes_at_the_truth() {
+        let h = Mat3::new(0.9, -0.2, 30.0, 0.15, 1.1, -12.0, 4e-4, -2e-4, 1.0);
+        let x1 = Vec2::new(210.0, 95.0);
+        let ac = ac_from_homography(&h, &x1, 0).unwrap();
+        for (d, _) in affine_residuals_and_gradients(&h, &x1, &ac.a) {
+            assert!(d.abs() < 1e-12, "{d}");
+        }
+        let a = ac.a + Mat2::new(0.01, -0.02, 0.03, 0.0);
+        let base = affine_residuals_and_gradients(&h, &x1, &a);
+        for k in 0..9 {
+            let step = 1e-6 * h[(k / 3, k % 3)].abs().max(1e-4);
+            let (mut hp, mut hm) = (h, h);
+            hp[(k / 3, k % 3)] += step;
+            hm[(k / 3, k % 3)] -= step;
+            let (p, m) = (
+                affine_residuals_and_gradients(&hp, &x1, &a),
+                affine_residuals_and_gradients(&hm, &x1, &a),
+            );
+            for e in 0..4 {
+                let fd = (p[e].0 - m[e].0) / (2.0 * step);
+                let an = base[e].1[k];
+                assert!(
+                    (fd - an).abs() <= 1e-6 * an.abs().max(1e-3),
+                    "entry {e}, h[{k}]: analytic {an}, central difference {fd}"
+                );
+            }
+        }
+    }
+}
