@@ -88,7 +88,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--pairs", type=int, default=200)
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
-    rows, rates = [], {}
+    rows, rates, cpu_per_pair = [], {}, {}
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         names = make_views(tmp / "images", args.images)
@@ -100,6 +100,7 @@ def main(argv: list[str] | None = None) -> int:
                 rate, cpu = _measured_run(pairs, tmp / "images", tmp / f"out{workers}", address)
             wall = len(pairs) / rate
             rates[workers] = rate
+            cpu_per_pair[workers] = cpu.get("ray::", 0) / len(pairs)
             daemons = sum(v for k, v in cpu.items() if k not in ("ray::", "other"))
             rows.append(
                 [workers, f"{rate:.2f}", f"{wall:.1f}", f"{cpu.get('ray::', 0) / wall:.2f}",
@@ -127,7 +128,12 @@ def main(argv: list[str] | None = None) -> int:
     lines += [
         "",
         f"Efficiency of the second worker: {rates[2] / (2 * rates[1]):.2f} "
-        "(rate with 2 / (2 x rate with 1)).",
+        "(rate with 2 / (2 x rate with 1)); it depends on the cores the task workers got "
+        "(the table's columns), i.e. on whatever else runs on the machine.",
+        "",
+        f"Work efficiency: {cpu_per_pair[1] / cpu_per_pair[2]:.2f} (task CPU per pair with "
+        "1 node / with 2): whether a pair costs more CPU when a second worker runs beside it; "
+        "independent of other load.",
         "",
     ]
     common.write_report(args.out, lines)
