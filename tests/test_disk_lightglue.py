@@ -142,3 +142,17 @@ def test_a_missing_model_names_the_export_command(tmp_path):
     with pytest.raises((FileNotFoundError, ValueError, RuntimeError)) as e:
         affcorr.Pipeline("disk-lightglue", models_dir=tmp_path)
     assert "disk_backbone.onnx" in str(e.value) and L.EXPORT_COMMAND in str(e.value)
+
+
+def test_the_cli_takes_the_matcher(capsys):
+    from affcorr import cli
+    from affcorr.data import graffiti_files
+
+    a, b, _ = graffiti_files()
+    h = str(a.parent / "H1to3p.xml")
+    args = ["homography", str(a), str(b), "--matcher", "disk-lightglue", "--max-keypoints", "1024"]
+    assert cli.main([*args, "--gt", h]) == 0
+    out = capsys.readouterr().out
+    # measured: 318 of 479 inliers, mean corner error 1.3 px
+    err = float(out.split("mean corner error vs ground truth:")[1].split()[0])
+    assert err < 3.0, out

