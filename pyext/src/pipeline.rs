@@ -65,12 +65,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     }
     m.add("PIPELINE_MATCHER_MODELS", needs)?;
     let files = PyDict::new(py);
-    for role in [
-        affcorr::pipeline::ModelRole::Backbone,
-        affcorr::pipeline::ModelRole::Refine,
-        affcorr::pipeline::ModelRole::LighterGlue,
-        affcorr::pipeline::ModelRole::Dense,
-    ] {
+    for role in affcorr::pipeline::ModelRole::ALL {
         files.set_item(role.name(), model_file(role))?;
     }
     files.set_item("shape", affcorr::pipeline::SHAPE_FILE)?;
@@ -218,7 +213,8 @@ impl PipelineRunner {
     #[new]
     #[pyo3(signature = (
         *, matcher, shape_model, backbone_model = None, refine_model = None,
-        lighterglue_model = None, dense_model = None, ort_library = None, max_keypoints = None,
+        lighterglue_model = None, dense_model = None, disk_backbone_model = None,
+        disk_lightglue_model = None, ort_library = None, max_keypoints = None,
         max_matches = None, max_side = None, threads = None, seed = None,
         refine_affine = defaults::REFINE_AFFINE, drop_unreliable = false,
         guided_matching = defaults::GUIDED_MATCHING,
@@ -234,6 +230,8 @@ impl PipelineRunner {
         refine_model: Option<PathBuf>,
         lighterglue_model: Option<PathBuf>,
         dense_model: Option<PathBuf>,
+        disk_backbone_model: Option<PathBuf>,
+        disk_lightglue_model: Option<PathBuf>,
         ort_library: Option<PathBuf>,
         max_keypoints: Option<&Bound<'_, PyAny>>,
         max_matches: Option<&Bound<'_, PyAny>>,
@@ -285,6 +283,12 @@ impl PipelineRunner {
         }
         if let Some(p) = lighterglue_model {
             b = b.lighterglue_model(p);
+        }
+        if let Some(p) = disk_backbone_model {
+            b = b.disk_backbone_model(p);
+        }
+        if let Some(p) = disk_lightglue_model {
+            b = b.disk_lightglue_model(p);
         }
         if let Some(n) = max_keypoints {
             b = b.max_keypoints(to_usize(n));
@@ -585,14 +589,20 @@ impl PipelineRunner {
         self.inner.views().mode.name()
     }
 
-    /// The matcher model's custom metadata: the XFeat backbone's, or the dense matcher's.
+    /// The matcher model's custom metadata: the XFeat or DISK backbone's, or the dense
+    /// matcher's.
     #[getter]
     fn matcher_metadata<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let d = PyDict::new(py);
-        let meta = match (self.inner.backbone(), self.inner.dense_matcher()) {
-            (Some(b), _) => b.metadata(),
-            (None, Some(m)) => m.metadata(),
-            (None, None) => return Ok(d),
+        let inner = &self.inner;
+        let meta = if let Some(b) = inner.backbone() {
+            b.metadata()
+        } else if let Some(b) = inner.disk_backbone() {
+            b.metadata()
+        } else if let Some(m) = inner.dense_matcher() {
+            m.metadata()
+        } else {
+            return Ok(d);
         };
         for (k, v) in meta {
             d.set_item(k, v)?;

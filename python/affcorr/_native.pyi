@@ -380,6 +380,8 @@ class PipelineRunner:
         backbone_model: str | os.PathLike[str] | None = None,
         refine_model: str | os.PathLike[str] | None = None,
         lighterglue_model: str | os.PathLike[str] | None = None,
+        disk_backbone_model: str | os.PathLike[str] | None = None,
+        disk_lightglue_model: str | os.PathLike[str] | None = None,
         dense_model: str | os.PathLike[str] | None = None,
         ort_library: str | os.PathLike[str] | None = None,
         max_keypoints: int | None = None,

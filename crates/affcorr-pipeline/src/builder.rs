@@ -20,6 +20,12 @@ pub const BACKBONE_FILE: &str = "xfeat_backbone.onnx";
 pub const REFINE_FILE: &str = "xfeat_refine.onnx";
 /// LighterGlue's file name.
 pub const LIGHTERGLUE_FILE: &str = "xfeat_lighterglue.onnx";
+/// The DISK backbone's file name (not shipped: `affcorr_runner::disk::EXPORT_COMMAND` makes
+/// it).
+pub const DISK_BACKBONE_FILE: &str = "disk_backbone.onnx";
+/// DISK's LightGlue: the name its pieces `disk_lightglue_{encode,layer,assign}.onnx` derive
+/// from (no file of this name exists).
+pub const DISK_LIGHTGLUE_FILE: &str = "disk_lightglue.onnx";
 /// The shape network's file name.
 pub const SHAPE_FILE: &str = "shape.onnx";
 /// A dense matcher's file name in a models directory (none is shipped: DKM/RoMa exports are
@@ -33,6 +39,8 @@ pub fn model_file(role: ModelRole) -> &'static str {
         ModelRole::Refine => REFINE_FILE,
         ModelRole::LighterGlue => LIGHTERGLUE_FILE,
         ModelRole::Dense => DENSE_FILE,
+        ModelRole::DiskBackbone => DISK_BACKBONE_FILE,
+        ModelRole::DiskLightGlue => DISK_LIGHTGLUE_FILE,
     }
 }
 
@@ -45,6 +53,8 @@ pub struct PipelineBuilder {
     refine: Option<PathBuf>,
     lighterglue: Option<PathBuf>,
     dense: Option<PathBuf>,
+    disk_backbone: Option<PathBuf>,
+    disk_lightglue: Option<PathBuf>,
     shape: Option<PathBuf>,
     max_keypoints: Option<usize>,
     max_matches: Option<usize>,
@@ -67,6 +77,8 @@ impl Default for PipelineBuilder {
             refine: None,
             lighterglue: None,
             dense: None,
+            disk_backbone: None,
+            disk_lightglue: None,
             shape: None,
             max_keypoints: None,
             max_matches: None,
@@ -90,7 +102,9 @@ impl PipelineBuilder {
     }
 
     /// A directory holding `xfeat_backbone.onnx`, `xfeat_refine.onnx`, `xfeat_lighterglue.onnx`
-    /// and `shape.onnx` (in the repository: `python/affcorr/models`). Paths set one by one
+    /// and `shape.onnx` (in the repository: `python/affcorr/models`), and for
+    /// [`Matcher::DiskLightGlue`] `disk_backbone.onnx` and `disk_lightglue_*.onnx` (exported
+    /// there at setup time, docs/matchers.md). Paths set one by one
     /// take precedence. There is no default: the Rust API takes explicit paths.
     pub fn models_dir(mut self, dir: impl Into<PathBuf>) -> Self {
         self.models_dir = Some(dir.into());
@@ -112,6 +126,20 @@ impl PipelineBuilder {
     /// The LighterGlue model (`matcher-lighterglue-v1`; only [`Matcher::XFeatLighterGlue`]).
     pub fn lighterglue_model(mut self, path: impl Into<PathBuf>) -> Self {
         self.lighterglue = Some(path.into());
+        self
+    }
+
+    /// The DISK backbone (`features-disk-v1`; only [`Matcher::DiskLightGlue`]).
+    pub fn disk_backbone_model(mut self, path: impl Into<PathBuf>) -> Self {
+        self.disk_backbone = Some(path.into());
+        self
+    }
+
+    /// DISK's LightGlue, as `<dir>/disk_lightglue.onnx`: its three pieces
+    /// `disk_lightglue_{encode,layer,assign}.onnx` must lie beside that path (only
+    /// [`Matcher::DiskLightGlue`]).
+    pub fn disk_lightglue_model(mut self, path: impl Into<PathBuf>) -> Self {
+        self.disk_lightglue = Some(path.into());
         self
     }
 
@@ -225,6 +253,8 @@ impl PipelineBuilder {
             ModelRole::Refine => (&self.refine, "refine_model"),
             ModelRole::LighterGlue => (&self.lighterglue, "lighterglue_model"),
             ModelRole::Dense => (&self.dense, "dense_matcher"),
+            ModelRole::DiskBackbone => (&self.disk_backbone, "disk_backbone_model"),
+            ModelRole::DiskLightGlue => (&self.disk_lightglue, "disk_lightglue_model"),
         };
         self.path(explicit, model_file(role), what)
     }
@@ -262,6 +292,8 @@ impl PipelineBuilder {
                 ModelRole::Refine => files.refine = path,
                 ModelRole::LighterGlue => files.lighterglue = path,
                 ModelRole::Dense => files.dense = path,
+                ModelRole::DiskBackbone => files.disk_backbone = path,
+                ModelRole::DiskLightGlue => files.disk_lightglue = path,
             }
         }
         // A dense matcher draws `max_matches` and keeps them all.

@@ -242,7 +242,7 @@ impl Features {
                 | (FeatureData::SemiDense(_), Matcher::XFeatStar)
                 | (
                     FeatureData::Sparse(_),
-                    Matcher::XFeatMnn | Matcher::XFeatLighterGlue
+                    Matcher::XFeatMnn | Matcher::XFeatLighterGlue | Matcher::DiskLightGlue
                 )
         );
         if !consistent || r.pos != data.len() {

@@ -19,7 +19,8 @@ use affcorr_ransac::{
     estimate_homography, estimate_relative_pose,
 };
 use affcorr_runner::{
-    Backbone, DenseMatcher, ImageFeatures, Matcher, PointMatcher, PointMatches, ShapeEstimator,
+    Backbone, DenseMatcher, DiskBackbone, ImageFeatures, Matcher, PointMatcher, PointMatches,
+    ShapeEstimator,
 };
 
 use crate::builder::PipelineBuilder;
@@ -151,6 +152,11 @@ impl Pipeline {
     /// The XFeat backbone (`None` for a dense matcher).
     pub fn backbone(&self) -> Option<&Backbone> {
         self.matcher.backbone()
+    }
+
+    /// The DISK backbone (`Some` for [`Matcher::DiskLightGlue`]).
+    pub fn disk_backbone(&self) -> Option<&DiskBackbone> {
+        self.matcher.disk_backbone()
     }
 
     /// The dense matcher (`Some` for [`Matcher::Dense`]).

@@ -32,6 +32,9 @@ pub const GLUE_ENCODE_CONTRACT: &str = "matcher-lightglue-encode-v1";
 pub const GLUE_LAYER_CONTRACT: &str = "matcher-lightglue-layer-v1";
 /// LightGlue in pieces: the assignment head of a layer and the mutual filter.
 pub const GLUE_ASSIGN_CONTRACT: &str = "matcher-lightglue-assign-v1";
+/// The DISK backbone ([`crate::disk`]): RGB image → detection logits and dense descriptors at
+/// full resolution.
+pub const DISK_BACKBONE_CONTRACT: &str = "features-disk-v1";
 /// A dense matcher (DKM, RoMa): two images → warp and certainty ([`crate::dense`]).
 pub const DENSE_WARP_CONTRACT: &str = "dense-warp-v1";
 
@@ -265,6 +268,32 @@ pub(crate) const GLUE_ASSIGN_SPEC: ContractSpec = ContractSpec {
     inputs: &[t("layer", I64, 1), t("desc0", F32, 3), t("desc1", F32, 3)],
     outputs: &[t("matches0", I64, 2), t("mscores0", F32, 2)],
     metadata: &GLUE_META,
+};
+
+pub(crate) const DISK_BACKBONE_SPEC: ContractSpec = ContractSpec {
+    name: DISK_BACKBONE_CONTRACT,
+    inputs: &[TensorSpec {
+        name: "image",
+        ty: F32,
+        rank: 4,
+        fixed: &[(0, 1), (1, 3)],
+    }],
+    outputs: &[
+        TensorSpec {
+            name: "heatmap",
+            ty: F32,
+            rank: 4,
+            fixed: &[(0, 1), (1, 1)],
+        },
+        t("descriptors", F32, 4),
+    ],
+    metadata: &[
+        "affcorr.input_multiple",
+        "affcorr.descriptor_dim",
+        "affcorr.detection.nms_size",
+        "affcorr.detection.threshold",
+        "affcorr.detection.top_k",
+    ],
 };
 
 pub(crate) const DENSE_WARP_SPEC: ContractSpec = ContractSpec {

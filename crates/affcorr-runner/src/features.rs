@@ -712,7 +712,8 @@ pub fn nms(
 pub struct SparseFeatures {
     /// (x, y) in the pixels of the image given to [`preprocess`].
     pub keypoints: Vec<[f32; 2]>,
-    /// Scores (> 0), descending.
+    /// Scores (> 0): XFeat's descending; DISK's (its detection logits) in the row-major order
+    /// of the keypoints, as upstream.
     pub scores: Vec<f32>,
     /// L2-normalised descriptors, `keypoints.len()` × `dim`.
     pub descriptors: Vec<f32>,

@@ -9,6 +9,8 @@
 //! - [`estimator`]: the ACs A = S_AB · R(O_AB) · A′(A″) of matched points.
 //! - [`features`]: the XFeat backbone (`features-backbone-v1`) and sparse / semi-dense feature
 //!   extraction from its maps (the specification is `python/affcorr/export/xfeat_reference.py`).
+//! - [`disk`]: the DISK backbone (`features-disk-v1`) and DISK's detection and descriptor
+//!   sampling (the specification is `python/affcorr/export/lightglue_models.py`).
 //! - [`matching`]: mutual nearest neighbours, the XFeat* refinement model and LighterGlue.
 //! - [`lightglue`]: LightGlue's adaptive layer loop (early exit, point pruning) over the
 //!   network exported in pieces; generic over sizes and layers.
@@ -41,6 +43,7 @@
 
 pub mod contract;
 pub mod dense;
+pub mod disk;
 pub mod error;
 pub mod estimator;
 pub mod features;
@@ -57,6 +60,7 @@ pub use shape::{ShapeBins, ShapeModel, ShapeModelOptions, ShapeOutputs, ShapePre
 
 pub use contract::resolve_threads;
 pub use dense::{DenseMatcher, DenseSample, DenseWarp, SamplingOptions, balanced_sample};
+pub use disk::{DiskBackbone, DiskConfig};
 pub use features::{Backbone, BackboneConfig, BackboneMaps, DenseFeatures, SparseFeatures};
 pub use lightglue::{AdaptiveGlue, GlueConfig, GlueDims, GluePieceFiles, GlueTrace};
 pub use matcher::{

@@ -6,6 +6,7 @@
 //! | `"xfeat"` | backbone; mutual nearest neighbours in Rust | cosine similarity |
 //! | `"xfeat-star"` | backbone at scales 0.6 and 1.3, MNN, refinement MLP | refinement confidence |
 //! | `"xfeat-lighterglue"` | backbone, LighterGlue | match score |
+//! | `"disk-lightglue"` | DISK backbone, LightGlue in pieces (adaptive loop) | match score |
 //! | `"dense"` | a `dense-warp-v1` model (DKM, RoMa), DKM's balanced sampling | the model's |
 //!
 //! Points are in pixels of the images given (pixel centres at integers); the caller orders,
@@ -19,14 +20,16 @@ use std::time::{Duration, Instant};
 use affcorr_image::{GrayImage, RgbImage};
 
 use crate::dense::{DenseMatcher, SamplingOptions, balanced_sample};
+use crate::disk::{DiskBackbone, with_export_hint};
 use crate::error::{Result, RunnerError};
 use crate::features::{
     Backbone, DenseFeatures, SparseFeatures, dense_split, detect_and_compute, plane, preprocess,
     star_scale_inputs,
 };
+use crate::lightglue::GluePieceFiles;
 use crate::matching::{
-    LighterGlue, RefineModel, mutual_nearest_neighbours, normalize_keypoints_lighterglue,
-    refine_matches,
+    LighterGlue, LighterGlueOptions, RefineModel, mutual_nearest_neighbours,
+    normalize_keypoints_lighterglue, refine_matches,
 };
 
 /// Which matcher gives the points.
@@ -41,6 +44,9 @@ pub enum Matcher {
     XFeatLighterGlue,
     /// A dense matcher (`dense-warp-v1`: DKM, RoMa) with DKM's balanced sampling (`"dense"`).
     Dense,
+    /// DISK keypoints (`features-disk-v1`) matched by LightGlue's adaptive loop
+    /// (`"disk-lightglue"`; models made by [`crate::disk::EXPORT_COMMAND`], not shipped).
+    DiskLightGlue,
 }
 
 /// A model a matcher runs.
@@ -54,27 +60,47 @@ pub enum ModelRole {
     LighterGlue,
     /// A dense matcher (`dense-warp-v1`).
     Dense,
+    /// The DISK backbone (`features-disk-v1`).
+    DiskBackbone,
+    /// DISK's LightGlue: the path `<dir>/disk_lightglue.onnx` names its pieces
+    /// `disk_lightglue_{encode,layer,assign}.onnx` beside it ([`GluePieceFiles::beside`]; there
+    /// is no one-graph file).
+    DiskLightGlue,
 }
 
 impl ModelRole {
-    /// The name of the role in APIs (`"backbone"`, `"refine"`, `"lighterglue"`, `"dense"`).
+    /// Every role.
+    pub const ALL: [ModelRole; 6] = [
+        Self::Backbone,
+        Self::Refine,
+        Self::LighterGlue,
+        Self::Dense,
+        Self::DiskBackbone,
+        Self::DiskLightGlue,
+    ];
+
+    /// The name of the role in APIs (`"backbone"`, `"refine"`, `"lighterglue"`, `"dense"`,
+    /// `"disk_backbone"`, `"disk_lightglue"`).
     pub fn name(self) -> &'static str {
         match self {
             Self::Backbone => "backbone",
             Self::Refine => "refine",
             Self::LighterGlue => "lighterglue",
             Self::Dense => "dense",
+            Self::DiskBackbone => "disk_backbone",
+            Self::DiskLightGlue => "disk_lightglue",
         }
     }
 }
 
 impl Matcher {
     /// Every matcher.
-    pub const ALL: [Matcher; 4] = [
+    pub const ALL: [Matcher; 5] = [
         Self::XFeatLighterGlue,
         Self::XFeatMnn,
         Self::XFeatStar,
         Self::Dense,
+        Self::DiskLightGlue,
     ];
 
     /// The name used by the Python API and the CLI.
@@ -84,6 +110,7 @@ impl Matcher {
             Self::XFeatStar => "xfeat-star",
             Self::XFeatLighterGlue => "xfeat-lighterglue",
             Self::Dense => "dense",
+            Self::DiskLightGlue => "disk-lightglue",
         }
     }
 
@@ -94,6 +121,7 @@ impl Matcher {
             Self::XFeatStar => &[ModelRole::Backbone, ModelRole::Refine],
             Self::XFeatLighterGlue => &[ModelRole::Backbone, ModelRole::LighterGlue],
             Self::Dense => &[ModelRole::Dense],
+            Self::DiskLightGlue => &[ModelRole::DiskBackbone, ModelRole::DiskLightGlue],
         }
     }
 }
@@ -108,13 +136,15 @@ impl FromStr for Matcher {
     type Err = RunnerError;
 
     /// `"xfeat"` (also `"xfeat-mnn"`), `"xfeat-star"` (`"xfeat*"`), `"xfeat-lighterglue"`
-    /// (`"lighterglue"`), `"dense"` (`"dense-warp"`), case-insensitive.
+    /// (`"lighterglue"`), `"dense"` (`"dense-warp"`), `"disk-lightglue"` (`"disk"`),
+    /// case-insensitive.
     fn from_str(s: &str) -> Result<Self> {
         match s.to_ascii_lowercase().replace('_', "-").as_str() {
             "xfeat" | "xfeat-mnn" => Ok(Self::XFeatMnn),
             "xfeat-star" | "xfeat*" => Ok(Self::XFeatStar),
             "xfeat-lighterglue" | "lighterglue" => Ok(Self::XFeatLighterGlue),
             "dense" | "dense-warp" => Ok(Self::Dense),
+            "disk-lightglue" | "disk" => Ok(Self::DiskLightGlue),
             _ => Err(RunnerError::invalid(
                 "matcher",
                 format!(
@@ -137,6 +167,10 @@ pub struct MatcherFiles {
     pub lighterglue: Option<PathBuf>,
     /// A dense matcher.
     pub dense: Option<PathBuf>,
+    /// The DISK backbone.
+    pub disk_backbone: Option<PathBuf>,
+    /// DISK's LightGlue (`<dir>/disk_lightglue.onnx`: its pieces lie beside that path).
+    pub disk_lightglue: Option<PathBuf>,
 }
 
 impl MatcherFiles {
@@ -147,6 +181,8 @@ impl MatcherFiles {
             ModelRole::Refine => self.refine.as_ref(),
             ModelRole::LighterGlue => self.lighterglue.as_ref(),
             ModelRole::Dense => self.dense.as_ref(),
+            ModelRole::DiskBackbone => self.disk_backbone.as_ref(),
+            ModelRole::DiskLightGlue => self.disk_lightglue.as_ref(),
         }
     }
 }
@@ -186,7 +222,7 @@ pub struct PointMatches {
 /// ([`PointMatcher::match_features`]), with the results of [`PointMatcher::match_images`].
 #[derive(Debug, Clone, PartialEq)]
 pub enum FeatureData {
-    /// Sparse XFeat keypoints and descriptors (`"xfeat"`, `"xfeat-lighterglue"`).
+    /// Sparse keypoints and descriptors (`"xfeat"`, `"xfeat-lighterglue"`, `"disk-lightglue"`).
     Sparse(SparseFeatures),
     /// The semi-dense cells of XFeat* at both scales (`"xfeat-star"`).
     SemiDense(DenseFeatures),
@@ -239,6 +275,7 @@ impl ImageFeatures {
 pub struct PointMatcher {
     kind: Matcher,
     backbone: Option<Backbone>,
+    disk: Option<DiskBackbone>,
     refine: Option<RefineModel>,
     lighterglue: Option<LighterGlue>,
     dense: Option<DenseMatcher>,
@@ -290,7 +327,19 @@ impl PointMatcher {
         } else {
             None
         };
-        let dim = backbone.as_ref().map_or(0, |b| b.config().descriptor_dim);
+        let disk = if needs(ModelRole::DiskBackbone) {
+            Some(DiskBackbone::load(
+                file(ModelRole::DiskBackbone, "disk_backbone_model")?,
+                Some(threads),
+            )?)
+        } else {
+            None
+        };
+        let dim = match (&backbone, &disk) {
+            (Some(b), _) => b.config().descriptor_dim,
+            (None, Some(d)) => d.config().descriptor_dim,
+            (None, None) => 0,
+        };
         let refine = if needs(ModelRole::Refine) {
             let r = RefineModel::load(file(ModelRole::Refine, "refine_model")?, Some(threads))?;
             check_dim("refine_model", r.source(), r.dim(), dim)?;
@@ -305,13 +354,24 @@ impl PointMatcher {
             )?;
             check_dim("lighterglue_model", g.source(), g.dim(), dim)?;
             Some(g)
+        } else if needs(ModelRole::DiskLightGlue) {
+            // Only the pieces exist (no one-graph LightGlue is exported for DISK); the
+            // environment's depth/width overrides apply as for LighterGlue.
+            let pieces =
+                GluePieceFiles::beside(file(ModelRole::DiskLightGlue, "disk_lightglue_model")?);
+            let g =
+                LighterGlue::load_pieces(&pieces, Some(threads), &LighterGlueOptions::from_env()?)
+                    .map_err(with_export_hint)?;
+            check_dim("disk_lightglue_model", g.source(), g.dim(), dim)?;
+            Some(g)
         } else {
             None
         };
-        let max_keypoints = match (&backbone, max_keypoints) {
-            (_, Some(n)) => n,
-            (Some(b), None) => b.config().top_k,
-            (None, None) => {
+        let max_keypoints = match (&backbone, &disk, max_keypoints) {
+            (_, _, Some(n)) => n,
+            (Some(b), _, None) => b.config().top_k,
+            (None, Some(d), None) => d.config().top_k,
+            (None, None, None) => {
                 return Err(RunnerError::invalid(
                     "max_keypoints",
                     "a dense matcher needs the number of matches to draw",
@@ -321,6 +381,7 @@ impl PointMatcher {
         Ok(Self {
             kind,
             backbone,
+            disk,
             refine,
             lighterglue,
             dense,
@@ -344,9 +405,20 @@ impl PointMatcher {
         self.seed
     }
 
-    /// The XFeat backbone (`None` for a dense matcher).
+    /// The XFeat backbone (`None` for a dense matcher and DISK).
     pub fn backbone(&self) -> Option<&Backbone> {
         self.backbone.as_ref()
+    }
+
+    /// The DISK backbone (`Some` for [`Matcher::DiskLightGlue`]).
+    pub fn disk_backbone(&self) -> Option<&DiskBackbone> {
+        self.disk.as_ref()
+    }
+
+    /// The LightGlue of the matcher (LighterGlue for XFeat, LightGlue for DISK; `None` for
+    /// the others).
+    pub fn glue(&self) -> Option<&LighterGlue> {
+        self.lighterglue.as_ref()
     }
 
     /// The dense matcher (`Some` for [`Matcher::Dense`]).
@@ -389,6 +461,18 @@ impl PointMatcher {
             Matcher::XFeatStar => FeatureData::SemiDense(self.dense_features(img, &mut timings)?),
             Matcher::XFeatMnn | Matcher::XFeatLighterGlue => {
                 FeatureData::Sparse(self.sparse_features(img, &mut timings)?)
+            }
+            Matcher::DiskLightGlue => {
+                let disk = self
+                    .disk
+                    .as_ref()
+                    .expect("DISK matchers load the DISK backbone");
+                let (data, h, w) = plane(img);
+                let (f, t) = disk.extract(data, h, w, self.max_keypoints)?;
+                timings.preprocess += t.preprocess;
+                timings.network += t.network;
+                timings.detection += t.detection;
+                FeatureData::Sparse(f)
             }
         };
         Ok(ImageFeatures {
@@ -644,8 +728,13 @@ mod tests {
     fn every_matcher_needs_its_models() {
         assert_eq!(Matcher::Dense.models(), &[ModelRole::Dense]);
         for m in Matcher::ALL.into_iter().filter(|&m| m != Matcher::Dense) {
-            assert_eq!(m.models()[0], ModelRole::Backbone);
+            let first = m.models()[0];
+            assert!(
+                first == ModelRole::Backbone || first == ModelRole::DiskBackbone,
+                "{m}"
+            );
         }
+        assert_eq!("DISK".parse::<Matcher>().unwrap(), Matcher::DiskLightGlue);
         let files = MatcherFiles::default();
         for m in Matcher::ALL {
             let e = PointMatcher::load(m, &files, Some(10), 0, 1).unwrap_err();

@@ -383,25 +383,36 @@ impl LighterGlue {
             GlueMode::Full => Self::load_full(path, threads),
             GlueMode::Adaptive => {
                 contract::check_model_file(path)?;
-                for p in [&pieces.encode, &pieces.layer, &pieces.assign] {
-                    contract::check_model_file(p)?;
-                }
-                let glue = AdaptiveGlue::load(&pieces, threads)?;
-                let d = glue.default_config();
-                let config = GlueConfig {
-                    depth_confidence: options.depth_confidence.unwrap_or(d.depth_confidence),
-                    width_confidence: options.width_confidence.unwrap_or(d.width_confidence),
-                };
-                config.validate()?;
-                Ok(Self {
-                    dim: glue.dims().input_dim,
-                    min_conf: glue.min_conf(),
-                    metadata: glue.metadata().clone(),
-                    source: glue.source().to_string(),
-                    net: GlueNet::Adaptive(Box::new(glue), config),
-                })
+                Self::load_pieces(&pieces, threads, options)
             }
         }
+    }
+
+    /// The adaptive loop over the three pieces `files` alone (a LightGlue exported only in
+    /// pieces, as DISK's); `options.mode` is ignored. A missing piece is a
+    /// [`RunnerError::ModelOpen`] that names it.
+    pub fn load_pieces(
+        files: &GluePieceFiles,
+        threads: Option<usize>,
+        options: &LighterGlueOptions,
+    ) -> Result<Self> {
+        for p in [&files.encode, &files.layer, &files.assign] {
+            contract::check_model_file(p)?;
+        }
+        let glue = AdaptiveGlue::load(files, threads)?;
+        let d = glue.default_config();
+        let config = GlueConfig {
+            depth_confidence: options.depth_confidence.unwrap_or(d.depth_confidence),
+            width_confidence: options.width_confidence.unwrap_or(d.width_confidence),
+        };
+        config.validate()?;
+        Ok(Self {
+            dim: glue.dims().input_dim,
+            min_conf: glue.min_conf(),
+            metadata: glue.metadata().clone(),
+            source: glue.source().to_string(),
+            net: GlueNet::Adaptive(Box::new(glue), config),
+        })
     }
 
     fn load_full(path: &Path, threads: Option<usize>) -> Result<Self> {

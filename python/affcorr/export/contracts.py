@@ -25,6 +25,10 @@ code path from it. The contracts (docs/matchers.md has the full text):
     transformer layer chosen by the input ``layer`` with its token-confidence and matchability
     heads; the assignment of a layer): :mod:`affcorr.export.lightglue_pieces` and
     docs/matchers.md.
+``features-disk-v1``
+    input ``image`` float32 (1, 3, H, W) RGB in [0, 1], H and W multiples of 16; outputs
+    ``heatmap`` (1, 1, H, W) DISK's detection logits and ``descriptors`` (1, D, H, W) raw dense
+    descriptors (:mod:`affcorr.export.lightglue_models`).
 ``dense-warp-v1``
     inputs ``image_a``, ``image_b`` float32 (1, 3, H, W) RGB in [0, 1]; outputs ``warp``
     (1, H', W', 2) position in B of each pixel of A in normalised [−1, 1] coordinates
@@ -49,6 +53,7 @@ GLUE_ENCODE = "matcher-lightglue-encode-v1"
 GLUE_LAYER = "matcher-lightglue-layer-v1"
 GLUE_ASSIGN = "matcher-lightglue-assign-v1"
 DENSE_WARP = "dense-warp-v1"
+DISK_BACKBONE = "features-disk-v1"
 
 _GLUE_META = [
     "affcorr.descriptor_dim",
@@ -136,6 +141,17 @@ CONTRACTS: dict[str, dict[str, Any]] = {
         "inputs": [("layer", 1, {0: 1}), ("desc0", 3, {0: 1}), ("desc1", 3, {0: 1})],
         "outputs": [("matches0", 2, {0: 1}), ("mscores0", 2, {0: 1})],
         "metadata": _GLUE_META,
+    },
+    DISK_BACKBONE: {
+        "inputs": [("image", 4, {0: 1, 1: 3})],
+        "outputs": [("heatmap", 4, {0: 1, 1: 1}), ("descriptors", 4, {0: 1})],
+        "metadata": [
+            "affcorr.input_multiple",
+            "affcorr.descriptor_dim",
+            "affcorr.detection.nms_size",
+            "affcorr.detection.threshold",
+            "affcorr.detection.top_k",
+        ],
     },
     DENSE_WARP: {
         "inputs": [("image_a", 4, {0: 1, 1: 3}), ("image_b", 4, {0: 1, 1: 3})],

