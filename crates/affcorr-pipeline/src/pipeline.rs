@@ -30,8 +30,8 @@ use crate::grow::{GrowOptions, grow};
 use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
 use crate::views::{
-    REFINE_BELOW, RIVAL_MARGIN, SCREEN_RUN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec,
-    WEAK_RATIO, cascade_steps, guided_view, refinement_view, rival_views, screen,
+    REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec, WEAK_RATIO,
+    cascade_steps, guided_view, refinement_view, rival_views, screen, screen_run,
     verified_fundamental, verify,
 };
 
@@ -711,7 +711,7 @@ impl Pipeline {
             q
         };
         // The views of screened groups past their best: tried once every step has run.
-        let mut deferred: Vec<(ViewSpec, Option<usize>)> = Vec::new();
+        let mut deferred: Vec<(f64, ViewSpec, Option<usize>)> = Vec::new();
         let (mut best, mut best_inliers) = (plain, if verified { inliers } else { 0 });
         // A view whose matches partly agree (too few to verify) guides the next one: the
         // dominant map of its agreeing ACs, in the original images, is undone first.
@@ -757,15 +757,23 @@ impl Pipeline {
                         }
                         // Best first (stable: ties keep the steps' order).
                         scored.sort_by_key(|(_, s)| std::cmp::Reverse(*s));
-                        let rest = scored.split_off(SCREEN_RUN.min(scored.len()));
+                        let scores: Vec<usize> = scored.iter().filter_map(|v| v.1).collect();
+                        let rest = scored.split_off(screen_run(&scores));
                         queue.extend(scored);
-                        deferred.extend(rest);
+                        // Deferred views wait ranked by their screen over their group's noise.
+                        let noise = scores.get(scores.len() / 2).map_or(1, |&n| n.max(1));
+                        deferred.extend(
+                            rest.into_iter()
+                                .map(|(v, s)| (s.unwrap_or(0) as f64 / noise as f64, v, s)),
+                        );
                         screen_time += t.elapsed();
                         continue;
                     }
                 }
             } else if !deferred.is_empty() {
-                queue.extend(deferred.drain(..));
+                // Best first across the groups (stable: ties keep the steps' order).
+                deferred.sort_by(|a, b| b.0.total_cmp(&a.0));
+                queue.extend(deferred.drain(..).map(|(_, v, s)| (v, s)));
                 continue;
             } else {
                 break;
