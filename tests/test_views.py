@@ -108,6 +108,7 @@ def test_a_steep_tilt_of_a_rotated_pair_is_solved_through_a_screened_tilt_view()
 
     a = affcorr.read_gray_image(GRAF / "graf1.png")
     b = affcorr.read_gray_image(GRAF / "graf3.png")
+
     # B' = W B with W = R(200°) T(4, 20°): compressed 4x along (sin 20°, cos 20°), then turned.
     def rot(deg):
         c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))

@@ -25,10 +25,18 @@
 //!    - in-plane **rotations** of B by 90°, 270°, 180° (the matchers hold up to about ±45°),
 //!      **zooms** of A or B by ½, the diagonal rotations, then zooms by ¼ (the matcher's
 //!      keypoint budget lands on the overlap);
-//!    - **tilts** t = 2 (4 directions) of A and of B, t = 4 (8 directions) of A, **tiles** of
-//!      B (half its size, magnified by 2, against A shrunk by ½: A a 4–8× zoom into B),
-//!      t = 4 of B, tiles of A; then t = 4 (8 directions) of A rotated by 90°, 270° and
-//!      180° (a steep tilt of a rotated pair).
+//!    - then **screened groups** ([`Step::Screened`], [`screen`]): tilts t = 2 (4 directions)
+//!      of A and of B, each against the other image as it is and rotated by 270°, 90° and
+//!      180° (a steep tilt of a rotated pair needs both undone); **tiles** of B (half its
+//!      size, magnified by 2, against A shrunk by ½: A a 4–8× zoom into B) and of A; tilts
+//!      t = 4 (8 directions) of A and of B against the rotations. A group extracts each of
+//!      its warped images once, ranks its views by XFeat's mutual nearest neighbours and a
+//!      homography's inliers (milliseconds, where LighterGlue and the ACs take hundreds),
+//!      matches those clearly above the group's noise ([`screen_run`]) and defers the rest
+//!      until every step has run.
+//!    - a view that verifies with fewer than [`REFINE_BELOW`] × min_inliers is followed by
+//!      its refinement ([`refinement_view`], the view its inliers' map guides); the one with
+//!      more inliers is kept.
 //! 3. Every AC of a view is mapped back to the original images with its A composed with the
 //!    synthetic warp ([`affcorr_image::ac_from_views`]), so the ACs are correct in the
 //!    original pixels whichever view produced them.
@@ -380,8 +388,8 @@ pub enum Step {
     /// Views whose warped images are few and shared (tilts of one image against rotations of
     /// the other; tiles against one zoom of the other): every warped image is extracted once,
     /// each view is screened by XFeat's mutual nearest neighbours, and the views are matched
-    /// best-screened first; after [`SCREEN_RUN`] of them the rest waits until every step has
-    /// run.
+    /// best-screened first; after [`screen_run`] of them the rest waits until every step has
+    /// run, best over its group's noise first.
     Screened(Vec<ViewSpec>),
 }
 
