@@ -1,7 +1,9 @@
 """The view cascade from Python: a pair the plain matcher cannot solve (graffiti 1→3 with
 image B turned upside down, exactly, by numpy) is solved through a synthetic view, its ACs are
 in the original pixels with A composed with the view's warp, and the report says which view.
-The Rust tests (crates/affcorr-pipeline/tests/views.rs) cover 135° and a 4x zoom."""
+The Rust tests (crates/affcorr-pipeline/tests/views.rs) cover 135° and a 4x zoom; here also a
+steep tilt of a rotated pair (B turned by 200° and foreshortened 4x), which only a tilt view
+against a rotated view of B solves."""
 
 from __future__ import annotations
 
@@ -99,3 +101,36 @@ def test_the_relative_budget_stops_the_cascade_of_a_pair_no_view_solves():
     res = two.match_pair(a, noise)
     assert len(res.views) == 3 and not any(v["verified"] for v in res.views), res.views
     assert all(v["window"] is None and v["other_scale"] == 1.0 for v in res.views)
+
+
+def test_a_steep_tilt_of_a_rotated_pair_is_solved_through_a_screened_tilt_view():
+    import cv2
+
+    a = affcorr.read_gray_image(GRAF / "graf1.png")
+    b = affcorr.read_gray_image(GRAF / "graf3.png")
+
+    # B' = W B with W = R(200°) T(4, 20°): compressed 4x along (sin 20°, cos 20°), then turned.
+    def rot(deg):
+        c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+        return np.array([[c, -s], [s, c]])
+
+    M = rot(200) @ rot(20).T @ np.diag([1.0, 0.25]) @ rot(20)  # noqa: N806
+    h, w = b.shape
+    corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], float) @ M.T
+    W = np.c_[M, -corners.min(0)]  # noqa: N806
+    size = tuple(int(v) for v in np.ceil(np.ptp(corners, axis=0)) + 1)
+    blurred = cv2.GaussianBlur(b.astype(np.float32), (0, 0), 0.8 * np.sqrt(15.0))
+    tilted = cv2.warpAffine(blurred, W, size, flags=cv2.INTER_LINEAR)
+    gt = np.vstack([W, [0, 0, 1]]) @ graffiti()[2]
+
+    H_off, _ = _pipe("off").homography(a, tilted)
+    assert not np.isfinite(H_off).all() or corner_error(H_off, gt, *a.shape[::-1]) > 20
+    H, info, res = _pipe("auto").homography(a, tilted, return_matches=True)
+    assert corner_error(H, gt, a.shape[1], a.shape[0]) < 5.0, res.views
+    # A screened tilt view against B rotated found it (its screen is the group's best), and
+    # the view its ACs guided refined it; either way the ACs are in the original pixels.
+    screened = [v for v in res.views if v["screen"] is not None]
+    assert screened and any(v["verified"] for v in res.views[1:]), res.views
+    c = res.corrs[info.inliers]
+    A_gt = affcorr.correspondences_from_homography(gt, c[:, :2])[:, 4:]  # noqa: N806
+    assert len(c) > 100 and np.median(np.linalg.norm(c[:, 4:] - A_gt, axis=1)) < 0.1

@@ -144,7 +144,7 @@ type MatchTuple<'py> = (
 
 /// The view cascade's report: one dict per view tried (`label`, `image` "A" | "B" | None,
 /// `rotation` (rad), `scale`, `tilt`, `tilt_angle` (rad), `guided`, `window`, `other_scale`,
-/// `matches`, `inliers`,
+/// `other_rotation` (rad), `matches`, `inliers`, `screen` (None unless ranked in a group),
 /// `verified`, `seconds`, and `used`: whether its ACs are the result's, `Matches::view`).
 fn view_reports<'py>(py: Python<'py>, m: &Matches) -> PyResult<Bound<'py, PyList>> {
     let out = PyList::empty(py);
@@ -166,9 +166,11 @@ fn view_reports<'py>(py: Python<'py>, m: &Matches) -> PyResult<Bound<'py, PyList
         d.set_item("guided", v.view.guided.map(|m| m.to_vec()))?;
         d.set_item("window", v.view.window.map(|w| w.to_vec()))?;
         d.set_item("other_scale", v.view.other_scale)?;
+        d.set_item("other_rotation", v.view.other_rotation)?;
         d.set_item("matches", v.matches)?;
         d.set_item("inliers", v.inliers)?;
         d.set_item("verified", v.verified)?;
+        d.set_item("screen", v.screen)?;
         d.set_item("seconds", v.time.as_secs_f64())?;
         out.append(d)?;
     }

@@ -128,8 +128,10 @@ class MatchResult:
         views: the view cascade's report, one dict per view tried, the plain pair first
             (``label``, ``image`` "A" / "B" / None, ``rotation`` and ``tilt_angle`` in
             radians, ``scale``, ``tilt``, ``guided``, ``window`` (the tile matched, as
-            fractions ``[x0, y0, x1, y1]``, or None), ``other_scale`` (the other image's
-            zoom), ``matches``, ``inliers``, ``verified``,
+            fractions ``[x0, y0, x1, y1]``, or None), ``other_scale`` and
+            ``other_rotation`` (radians; the other image's zoom and in-plane rotation),
+            ``matches``, ``inliers``, ``verified``, ``screen`` (the view's rank score in a
+            screened group of tilts or tiles, else None),
             ``seconds``, ``used``: whether its ACs are the result's); empty when the cascade
             did not run (``views="off"``, dense matchers).
     """
@@ -210,7 +212,7 @@ class Pipeline:
             times the plain pass (the default: ``PIPELINE_DEFAULTS["view_relative_budget"]``;
             None: no limit). It bounds what a pair that no view solves costs, on any machine
             and image size.
-        max_views: at most this many synthetic views (None: the default, 64).
+        max_views: at most this many synthetic views (None: the default, 256).
         channel_order: ``"bgr"`` for ``cv2.imread`` arrays (files are decoded by their own
             format; torch tensors ``(C, H, W)`` are accepted).
         refine_affine: refine the network's ACs against the images by affine Lucas-Kanade

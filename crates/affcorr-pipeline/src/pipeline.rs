@@ -1,6 +1,7 @@
 //! [`Pipeline`]: the stages in order (see the crate docs), one pair or many.
 
-use std::borrow::Cow;
+use std::collections::{HashMap, VecDeque};
+use std::rc::Rc;
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
@@ -30,8 +31,9 @@ use crate::grow::{GrowOptions, grow};
 use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
 use crate::views::{
-    RIVAL_MARGIN, ViewMode, ViewOptions, ViewReport, ViewSpec, WEAK_RATIO, candidate_views,
-    guided_view, rival_views, verified_fundamental, verify,
+    REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec, WEAK_RATIO,
+    cascade_steps, guided_view, refinement_view, rival_views, screen, screen_run,
+    verified_fundamental, verify,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -97,6 +99,17 @@ pub struct Pipeline {
     /// `threads` single-threaded copies for `match_pairs`, built on its first call (or the
     /// error that prevented it, as text: then batches run one pair after the other).
     pub(crate) workers: OnceLock<std::result::Result<Vec<Pipeline>, String>>,
+}
+
+/// A warped image of the cascade: the image (0: A, 1: B), the warp's bits and the view's size.
+type WarpKey = (usize, [u64; 6], usize, usize);
+
+fn warp_key(image: usize, w: &Option<(AffineWarp, usize, usize)>) -> Option<WarpKey> {
+    w.map(|(warp, vw, vh)| {
+        let [a, b, c, d] = warp.m.map(f64::to_bits);
+        let [e, f] = warp.c.map(f64::to_bits);
+        (image, [a, b, c, d, e, f], vw, vh)
+    })
 }
 
 /// At most this many views guided by the ACs of earlier views, per pair.
@@ -550,17 +563,34 @@ impl Pipeline {
         Ok(work)
     }
 
-    /// The features of a view of an image: extracted when the view warps it, else the plain
-    /// pass's `plain`.
-    fn view_features<'f>(
+    /// The features of one image's side of a view: the plain pass's (`plain`) when the view
+    /// leaves the image as it is, else those of its warp, extracted once per pair (`cache`);
+    /// `None` for a warp too small for the matcher. An extraction here is timed into
+    /// `timings` once; the matching of a view subtracts its features' extraction times.
+    fn warped_features(
         &self,
-        view: &Option<GrayImage>,
-        plain: &'f ImageFeatures,
-    ) -> Result<Cow<'f, ImageFeatures>> {
-        Ok(match view {
-            Some(v) => Cow::Owned(self.matcher.extract(v, None)?),
-            None => Cow::Borrowed(plain),
-        })
+        cache: &mut HashMap<WarpKey, Rc<ImageFeatures>>,
+        image: usize,
+        img: &GrayImage,
+        warp: &Option<(AffineWarp, usize, usize)>,
+        plain: &Rc<ImageFeatures>,
+        timings: &mut Timings,
+    ) -> Result<Option<Rc<ImageFeatures>>> {
+        let (Some((w, vw, vh)), Some(key)) = (warp, warp_key(image, warp)) else {
+            return Ok(Some(plain.clone()));
+        };
+        if let Some(hit) = cache.get(&key) {
+            return Ok(Some(hit.clone()));
+        }
+        if (*vw).min(*vh) < 32 {
+            return Ok(None);
+        }
+        let f = Rc::new(self.matcher.extract(&warp_image(img, w, *vw, *vh)?, None)?);
+        timings.decode += f.timings.preprocess;
+        timings.matcher += f.timings.network;
+        timings.detection += f.timings.detection;
+        cache.insert(key, f.clone());
+        Ok(Some(f))
     }
 
     /// Patches, shape network and refinement on the matches `raw` of two images (the working
@@ -648,6 +678,7 @@ impl Pipeline {
             matches: plain.corrs.len(),
             inliers,
             verified,
+            screen: None,
             time: start.elapsed(),
         }];
         // A weak verification (few of the matches agree) may be a repetitive pattern matched
@@ -674,54 +705,108 @@ impl Pipeline {
             .filter(|(_, m)| **m)
             .map(|(r, _)| *r)
             .collect();
-        let mut queue: std::collections::VecDeque<ViewSpec> = if rival_floor > 0 {
-            rival_views().into()
+        let mut queue: VecDeque<(ViewSpec, Option<usize>)> = VecDeque::new();
+        let mut steps: VecDeque<Step> = if rival_floor > 0 {
+            rival_views().into_iter().map(Step::View).collect()
         } else {
-            let mut q: std::collections::VecDeque<ViewSpec> =
-                guided_view(&inlier_acs).into_iter().collect();
-            q.extend(candidate_views());
+            let mut q: VecDeque<Step> = guided_view(&inlier_acs)
+                .map(Step::View)
+                .into_iter()
+                .collect();
+            q.extend(cascade_steps());
             q
         };
+        // The views of screened groups past their best: tried once every step has run.
+        let mut deferred: Vec<(f64, ViewSpec, Option<usize>)> = Vec::new();
         let (mut best, mut best_inliers) = (plain, if verified { inliers } else { 0 });
         // A view whose matches partly agree (too few to verify) guides the next one: the
         // dominant map of its agreeing ACs, in the original images, is undone first.
         let (mut guide_inliers, mut guided) = (inlier_acs.len(), 0);
         let mut tried = 0;
-        while let Some(view) = queue.pop_front() {
+        // A verified view's refinement is queued: the cascade stops after it.
+        let mut refining = false;
+        let sizes = (
+            (work_a.width(), work_a.height()),
+            (work_b.width(), work_b.height()),
+        );
+        // Views share warps (the tilts of A against B's rotations, the tiles against one zoom
+        // of the other image): each warped image's features are extracted once per pair.
+        let mut cache: HashMap<WarpKey, Rc<ImageFeatures>> = HashMap::new();
+        let (plain_a, plain_b) = (Rc::new(features_a.clone()), Rc::new(features_b.clone()));
+        // The time a group's screen took, counted in the first view it runs.
+        let mut screen_time = Duration::ZERO;
+        loop {
             if tried >= o.max_views || !o.within_budget(start.elapsed(), plain_cost) {
                 break;
             }
+            let (view, screen_score) = if let Some(v) = queue.pop_front() {
+                v
+            } else if let Some(step) = steps.pop_front() {
+                match step {
+                    Step::View(v) => (v, None),
+                    Step::Screened(group) => {
+                        let t = Instant::now();
+                        let mut scored = Vec::with_capacity(group.len());
+                        for v in group {
+                            let [a_warp, b_warp] = v.warps(sizes.0, sizes.1);
+                            let (Some(fa), Some(fb)) = (
+                                self.warped_features(
+                                    &mut cache, 0, work_a, &a_warp, &plain_a, timings,
+                                )?,
+                                self.warped_features(
+                                    &mut cache, 1, work_b, &b_warp, &plain_b, timings,
+                                )?,
+                            ) else {
+                                continue;
+                            };
+                            scored.push((v, Some(screen(&fa, &fb)?)));
+                        }
+                        // Best first (stable: ties keep the steps' order).
+                        scored.sort_by_key(|(_, s)| std::cmp::Reverse(*s));
+                        let scores: Vec<usize> = scored.iter().filter_map(|v| v.1).collect();
+                        let rest = scored.split_off(screen_run(&scores));
+                        queue.extend(scored);
+                        // Deferred views wait ranked by their screen over their group's noise.
+                        let noise = scores.get(scores.len() / 2).map_or(1, |&n| n.max(1));
+                        deferred.extend(
+                            rest.into_iter()
+                                .map(|(v, s)| (s.unwrap_or(0) as f64 / noise as f64, v, s)),
+                        );
+                        screen_time += t.elapsed();
+                        continue;
+                    }
+                }
+            } else if !deferred.is_empty() {
+                // Best first across the groups (stable: ties keep the steps' order).
+                deferred.sort_by(|a, b| b.0.total_cmp(&a.0));
+                queue.extend(deferred.drain(..).map(|(_, v, s)| (v, s)));
+                continue;
+            } else {
+                break;
+            };
             tried += 1;
             let t = Instant::now();
-            let [a_warp, b_warp] = view.warps(
-                (work_a.width(), work_a.height()),
-                (work_b.width(), work_b.height()),
-            );
+            let [a_warp, b_warp] = view.warps(sizes.0, sizes.1);
+            let (Some(fa), Some(fb)) = (
+                self.warped_features(&mut cache, 0, work_a, &a_warp, &plain_a, timings)?,
+                self.warped_features(&mut cache, 1, work_b, &b_warp, &plain_b, timings)?,
+            ) else {
+                // A view too small for the matcher is skipped, not an error of the pair.
+                continue;
+            };
+            let mut raw = self.matcher.match_features(&fa, &fb)?;
+            // The features were timed where they were extracted (the plain pass, this view's
+            // warp or an earlier view's): only the matching is this view's.
+            for f in [&fa, &fb] {
+                raw.timings.preprocess -= f.timings.preprocess;
+                raw.timings.network -= f.timings.network;
+                raw.timings.detection -= f.timings.detection;
+            }
             let warped = |img: &GrayImage, w: &Option<(AffineWarp, usize, usize)>| {
                 w.map(|(warp, vw, vh)| warp_image(img, &warp, vw, vh))
                     .transpose()
             };
             let (va, vb) = (warped(work_a, &a_warp)?, warped(work_b, &b_warp)?);
-            // A view too small for the matcher is skipped, not an error of the pair.
-            let small =
-                |v: &Option<GrayImage>| v.as_ref().is_some_and(|v| v.width().min(v.height()) < 32);
-            if small(&va) || small(&vb) {
-                continue;
-            }
-            // An image the view leaves as it is keeps the plain pass's features.
-            let (fa, fb) = (
-                self.view_features(&va, features_a)?,
-                self.view_features(&vb, features_b)?,
-            );
-            let mut raw = self.matcher.match_features(&fa, &fb)?;
-            // The reused features' extraction was the plain pass's, timed there.
-            for f in [&fa, &fb] {
-                if let Cow::Borrowed(f) = f {
-                    raw.timings.preprocess -= f.timings.preprocess;
-                    raw.timings.network -= f.timings.network;
-                    raw.timings.detection -= f.timings.detection;
-                }
-            }
             let (va, vb) = (va.as_ref().unwrap_or(work_a), vb.as_ref().unwrap_or(work_b));
             let m = self.match_working(va, vb, raw, timings)?;
             let (wa, wb) = (
@@ -735,17 +820,19 @@ impl Pipeline {
                 .collect();
             let (inliers, mask) = verify(&corrs)?;
             let verified = passes(inliers, corrs.len());
-            if !verified && inliers > guide_inliers && guided < MAX_GUIDED_VIEWS {
-                let agreeing: Vec<[f64; 8]> = corrs
-                    .iter()
-                    .zip(&mask)
-                    .filter(|(_, m)| **m)
-                    .map(|(r, _)| *r)
-                    .collect();
-                if let Some(g) = guided_view(&agreeing) {
-                    queue.push_front(g);
-                    (guide_inliers, guided) = (inliers, guided + 1);
-                }
+            let agreeing: Vec<[f64; 8]> = corrs
+                .iter()
+                .zip(&mask)
+                .filter(|(_, m)| **m)
+                .map(|(r, _)| *r)
+                .collect();
+            if !verified
+                && inliers > guide_inliers
+                && guided < MAX_GUIDED_VIEWS
+                && let Some(g) = guided_view(&agreeing)
+            {
+                queue.push_front((g, None));
+                (guide_inliers, guided) = (inliers, guided + 1);
             }
             tracing::debug!(
                 view = %view.label(),
@@ -759,13 +846,27 @@ impl Pipeline {
                 matches: corrs.len(),
                 inliers,
                 verified,
-                time: t.elapsed(),
+                screen: screen_score,
+                time: t.elapsed() + std::mem::take(&mut screen_time),
             });
-            if verified && inliers > best_inliers && inliers >= rival_floor {
+            let better = verified && inliers > best_inliers && inliers >= rival_floor;
+            if better {
                 best_inliers = inliers;
                 best = WorkMatches { corrs, ..m };
-                if o.mode == ViewMode::Auto {
+            }
+            if o.mode == ViewMode::Auto {
+                if refining {
                     break;
+                }
+                if better {
+                    // Few inliers: the view that undoes their map exactly may find many more.
+                    match refinement_view(&view, &agreeing) {
+                        Some(r) if inliers < REFINE_BELOW * o.min_inliers => {
+                            queue.push_front((r, None));
+                            refining = true;
+                        }
+                        _ => break,
+                    }
                 }
             }
         }
