@@ -283,6 +283,8 @@ def test_bad_arguments_name_themselves(images, tmp_path) -> None:
         batch.run(["view0.png"], folder, tmp_path)
     with pytest.raises(FileNotFoundError, match="image_dir"):
         batch.run([(names[0], names[1])], tmp_path / "nope", tmp_path)
+    with pytest.raises(ValueError, match="ship_images: .*ray_address"):
+        batch.run([(names[0], names[1])], folder, tmp_path, ship_images=True)
     cams = tmp_path / "cams.txt"
     cams.write_text("view0.png PINHOLE 320 256 300 300\n")
     with pytest.raises(ValueError, match="PINHOLE takes 4 parameters"):

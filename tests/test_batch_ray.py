@@ -1,7 +1,8 @@
 """affcorr batch on a real local Ray cluster (issue 25): a head node without CPUs and two worker
 nodes of one CPU each on 127.0.0.1 (``ray start --head``, ``ray start --address``); a worker
 process is killed during the run, and every pair is still present and equal to the serial
-result."""
+result; with the images shipped as bytes, the workers never read the image folder and the
+results are the same."""
 
 from __future__ import annotations
 
@@ -113,3 +114,15 @@ def test_ray_batch_survives_a_killed_worker(cluster, images, serial, tmp_path) -
     assert_equals_serial(tmp_path, serial)
     workers = {g["_attrs"]["worker"] for g in read_matches(tmp_path).values()}
     assert f"{socket.gethostname()}:{killed[0]}" in workers and len(workers) >= 2
+
+
+def test_ray_batch_ships_images_as_bytes(cluster, images, serial, tmp_path) -> None:  # noqa: F811
+    folder, names = images
+    pairs = good_pairs(names)
+    s = batch.run(
+        pairs, folder, tmp_path, ray_address=cluster, ship_images=True, chunk_size=2,
+        cache=False, progress=False, **OPTIONS,
+    )  # fmt: skip
+    assert (s.executor, s.matched, s.failed) == ("ray", len(pairs), 0), s
+    assert set(read_matches(tmp_path)) == set(pairs)
+    assert_equals_serial(tmp_path, serial)

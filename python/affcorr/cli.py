@@ -536,6 +536,7 @@ def cmd_batch(args) -> int:
         workers=args.workers,
         threads_per_worker=args.threads_per_worker,
         ray_address=args.ray,
+        ship_images=args.ship_images,
         chunk_size=args.chunk_size,
         cache=args.cache,
         resume=args.resume,
@@ -663,6 +664,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="ADDRESS",
         default=None,
         help="run on the Ray cluster at ADDRESS ('auto', host:port, ray://host:port)",
+    )
+    p.add_argument(
+        "--ship-images",
+        action="store_true",
+        help="with --ray: send the images' bytes through Ray's object store (workers without "
+        "the image folder, e.g. no shared file system)",
     )
     p.add_argument("--chunk-size", type=int, default=4, help="pairs per task (default: 4)")
     p.add_argument(

@@ -196,8 +196,16 @@ def a_sources(name: str, m: dict) -> list[str]:
 # --- estimation through the peer harness's worker -----------------------------------------------
 
 
-def run_worker(group: str, scene_list: list[dict], methods: list[str], tmp: Path) -> dict:
-    """The peer worker in the group's venv on ``scene_list`` (dicts with corrs, K1, K2)."""
+def run_worker(
+    group: str,
+    scene_list: list[dict],
+    methods: list[str],
+    tmp: Path,
+    problem: str = "relpose",
+    threshold: float = THRESHOLD,
+) -> dict:
+    """The peer worker in the group's venv on ``scene_list`` (dicts with corrs, K1, K2):
+    ``problem`` "relpose", "homography" or "fundamental" at ``threshold`` px."""
     py = peer_run.GROUP_PYTHON[group]
     if not py.exists():
         return {"group_error": f"{py} missing: run benches/eval/pose_setup.sh"}
@@ -205,7 +213,7 @@ def run_worker(group: str, scene_list: list[dict], methods: list[str], tmp: Path
     scene_io.save(src, scene_list)
     if dst.exists():
         dst.unlink()
-    cmd = common.module_cmd(py, peer_run.WORKER, group, "relpose", THRESHOLD, src, dst, *methods)
+    cmd = common.module_cmd(py, peer_run.WORKER, group, problem, threshold, src, dst, *methods)
     p = subprocess.run(cmd, env=peer_run.worker_env(), capture_output=True, text=True)
     if p.returncode != 0 or not dst.exists():
         return {"group_error": f"worker failed ({p.returncode}): {p.stderr[-600:]}"}

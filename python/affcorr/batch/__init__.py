@@ -15,7 +15,10 @@ documents the layout.
 - **Local or Ray**: by default a process per core (``workers``), each running the pipeline with
   ``threads_per_worker`` threads (ONNX Runtime and rayon); with ``ray_address`` (``--ray``) the
   chunks of ``chunk_size`` pairs are Ray tasks on an existing cluster, the model files shipped
-  once through the object store, the images read from the shared file system.
+  once through the object store, the images read from the shared file system or, with
+  ``ship_images=True`` (``--ship-images``) for workers that cannot see the image folder, sent
+  once each through the object store as their files' bytes (decoded by the same decoder, so the
+  results are identical).
 - **Resumable**: each pair's group carries a checksum of its inputs (both images' bytes, the
   cameras) and options (pipeline, models, geometry); ``resume=True`` skips the pairs written
   with the same checksum and redoes the others.

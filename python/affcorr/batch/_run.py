@@ -138,6 +138,7 @@ def run(
     workers: int | None = None,
     threads_per_worker: int = 1,
     ray_address: str | None = None,
+    ship_images: bool = False,
     chunk_size: int = 4,
     cache: bool = True,
     memory_images: int = 32,
@@ -176,6 +177,11 @@ def run(
         raise ValueError(f"workers must be a positive int or None, got {workers!r}")
     if not snap_px > 0:
         raise ValueError(f"snap_px must be positive, got {snap_px!r}")
+    if ship_images and ray_address is None:
+        raise ValueError(
+            "ship_images: sending images as bytes is for Ray workers (ray_address / --ray); "
+            "local workers read image_dir"
+        )
     if output.exists() and not output.is_dir():
         raise ValueError(f"output: {str(output)!r} exists and is not a directory")
     existing = [
@@ -357,8 +363,9 @@ def run(
         if ray_address is not None:
             summary.executor = "ray"
             summary.workers, summary.retried = _run_ray(
-                ray_address, config, models, chunks, retries, handle
-            )
+                ray_address, config, models, chunks, retries, handle,
+                image_dir if ship_images else None,
+            )  # fmt: skip
         else:
             n = workers or max(1, (os.cpu_count() or 1) // threads_per_worker)
             n = max(1, min(n, len(chunks)))
@@ -454,11 +461,20 @@ def _run_local(
 
 
 def _run_ray(
-    address: str, config: dict[str, Any], models: dict[str, Path], chunks, retries: int, handle
+    address: str,
+    config: dict[str, Any],
+    models: dict[str, Path],
+    chunks,
+    retries: int,
+    handle,
+    ship_from: Path | None = None,
 ) -> tuple[int, int]:
     """Chunks as Ray tasks (``config["threads"]`` CPUs each) on the cluster at ``address``
     (``"auto"``, ``"ray://host:port"`` or ``"host:port"``; ``"local"`` starts one). The model
     files go to the object store once; each worker process fetches them on its first task.
+    With ``ship_from`` (``ship_images``) every image's file bytes go to the object store once
+    too, and the workers never read an image folder: a task carries the references of its
+    chunk's images and fetches only those its worker has no features for.
     Ray retries a task whose worker dies (``retries`` times); after that its pairs are tried
     one by one, and recorded as failed if they still kill their worker."""
     try:
@@ -479,6 +495,20 @@ def _run_ray(
         shipped = dict(config, models_dir_shipped=True, models_dir=None)
         shipped["pipeline"] = {k: v for k, v in config["pipeline"].items() if k != "shape_model"}
         box = [ray.put(files)]
+        image_refs: dict[str, Any] = {}
+        if ship_from is not None:
+            shipped["image_dir"] = None
+            for chunk in chunks:
+                for t in chunk:
+                    for n in (t["name0"], t["name1"]):
+                        if n not in image_refs:
+                            image_refs[n] = ray.put((ship_from / n).read_bytes())
+
+        def refs_of(chunk: list[dict]) -> dict[str, Any] | None:
+            if not image_refs:
+                return None
+            return {n: image_refs[n] for t in chunk for n in (t["name0"], t["name1"])}
+
         task = ray.remote(_worker.process_chunk_shipped).options(
             num_cpus=config["threads"], max_retries=retries, retry_exceptions=False
         )
@@ -490,7 +520,7 @@ def _run_ray(
         while queue or inflight:
             while queue and len(inflight) < limit:
                 chunk, attempt = queue.pop()
-                inflight[task.remote(shipped, box, chunk)] = (chunk, attempt)
+                inflight[task.remote(shipped, box, chunk, refs_of(chunk))] = (chunk, attempt)
             ready, _ = ray.wait(list(inflight), num_returns=1)
             for ref in ready:
                 chunk, attempt = inflight.pop(ref)

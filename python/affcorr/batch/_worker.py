@@ -47,6 +47,8 @@ class _State:
         self.config = config
         self.features: OrderedDict[str, Any] = OrderedDict()
         self.reported: set[str] = set()
+        # {image name: Ray object reference of its file's bytes} of the chunk in hand.
+        self.shipped_images: dict[str, Any] = {}
         self.worker = f"{socket.gethostname()}:{os.getpid()}"
 
     # ------------------------------------------------------------------ features
@@ -70,7 +72,7 @@ class _State:
                 except (OSError, ValueError):
                     f = None  # a damaged entry is recomputed and replaced
         if f is None:
-            f = self.pipeline.extract(Path(self.config["image_dir"]) / name)
+            f = self._extract(name)
             if path is not None:
                 tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
                 try:
@@ -82,6 +84,23 @@ class _State:
         while len(self.features) > self.config["memory_images"]:
             self.features.popitem(last=False)
         return f
+
+    def _extract(self, name: str) -> Any:
+        """Features of image `name`, read from the image folder or, when the driver ships the
+        images (``ship_images``), from its bytes in Ray's object store."""
+        ref = self.shipped_images.get(name)
+        if ref is None:
+            if self.config["image_dir"] is None:
+                raise RuntimeError(f"image {name!r} was not shipped to this worker")
+            return self.pipeline.extract(Path(self.config["image_dir"]) / name)
+        import ray
+
+        # The file's own bytes under its own suffix: the same decoder as for a path, so the
+        # features are identical to those read from the folder.
+        with tempfile.NamedTemporaryFile(suffix=Path(name).suffix) as tmp:
+            tmp.write(ray.get(ref))
+            tmp.flush()
+            return self.pipeline.extract(tmp.name)
 
     def feature_record(self, name: str, f: Any) -> dict[str, Any]:
         """What features.h5 holds of an image (hloc's layout)."""
@@ -236,10 +255,14 @@ def process_chunk(config: dict[str, Any], chunk: list[dict[str, Any]]) -> list[d
 
 
 def process_chunk_shipped(
-    config: dict[str, Any], box: list[Any], chunk: list[dict[str, Any]]
+    config: dict[str, Any],
+    box: list[Any],
+    chunk: list[dict[str, Any]],
+    images: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """:func:`process_chunk` under Ray: ``box`` holds the object-store reference of the model
-    files' bytes, fetched only by a worker that has no pipeline for this batch yet."""
+    files' bytes, fetched only by a worker that has no pipeline for this batch yet; ``images``
+    the references of the chunk's image files when the driver ships them."""
     st = _STATE.get("state")
     if st is None or st.config["key"] != config["key"]:
         import ray
@@ -255,6 +278,7 @@ def process_chunk_shipped(
             if role == "shape":
                 models["shape"] = path
         st = _state(config, models)
+    st.shipped_images = images or {}
     return [st.pair(t) for t in chunk]
 
 
