@@ -16,8 +16,12 @@ use crate::views::ViewMode;
 /// the shipped matchers).
 pub const MATCHER: Matcher = Matcher::XFeatLighterGlue;
 
-/// Keypoints per image (semi-dense cells for XFeat*).
-pub const MAX_KEYPOINTS: usize = 2048;
+/// Keypoints per image (semi-dense cells for XFeat*). 1024: the fastest configuration within
+/// 5 points of the best on every family of benches/results/defaults.md (2048 was, before the
+/// view cascade solved the extreme tilts at 1024), and as successful as 2048 at about half
+/// its time against SIFT + PoseLib in benches/results/speed_tiers.md. LighterGlue's cost
+/// grows with the square of this number.
+pub const MAX_KEYPOINTS: usize = 1024;
 
 /// Matches a dense matcher draws when `max_matches` is not set. DKM draws 10 000; each costs a
 /// shape-network evaluation and a refinement, so fewer by default.
