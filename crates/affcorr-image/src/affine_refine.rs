@@ -299,16 +299,25 @@ impl<const C: usize> Plane<C> {
                 return;
             }
             // Central differences, one-sided at the border: (next − previous) / their distance.
+            // The interior and the two end columns apart, so that the inner loop has no
+            // clamping (the same values as the clamped formula everywhere).
             let (yu, yd) = (y.saturating_sub(1), (y + 1).min(h - 1));
             let (up, down) = (&blurred[yu * w..][..w], &blurred[yd * w..][..w]);
             let dy = (yd - yu).max(1) as f32;
-            for x in 0..w {
-                let (xl, xr) = (x.saturating_sub(1), (x + 1).min(w - 1));
-                let o = &mut out[x];
-                o[0] = row[x];
-                o[1] = (row[xr] - row[xl]) / ((xr - xl).max(1) as f32);
-                o[2] = (down[x] - up[x]) / dy;
+            for (((o, &v), &u), &d) in out.iter_mut().zip(row).zip(up).zip(down) {
+                o[0] = v;
+                o[2] = (d - u) / dy;
             }
+            if w == 1 {
+                out[0][1] = 0.0;
+                return;
+            }
+            let inner = out[1..w - 1].iter_mut().zip(&row[..w - 2]).zip(&row[2..]);
+            for ((o, &left), &right) in inner {
+                o[1] = (right - left) / 2.0;
+            }
+            out[0][1] = row[1] - row[0];
+            out[w - 1][1] = row[w - 1] - row[w - 2];
         });
         Self {
             data,
@@ -997,6 +1006,28 @@ mod tests {
             },
             "min_zncc",
         );
+    }
+
+    #[test]
+    fn gradients_are_the_clamped_central_differences() {
+        // Widths 1 and 2 have no interior column; heights 1 and 2 no interior row.
+        for (w, h) in [(30, 20), (2, 3), (1, 4), (5, 1), (3, 2)] {
+            let plane = Plane::<3>::new(&texture(w, h, 3), 0.0);
+            let image = texture(w, h, 3);
+            let v = |x: usize, y: usize| image.data()[y * w + x];
+            for y in 0..h {
+                for x in 0..w {
+                    let (xl, xr) = (x.saturating_sub(1), (x + 1).min(w - 1));
+                    let (yu, yd) = (y.saturating_sub(1), (y + 1).min(h - 1));
+                    let want = [
+                        v(x, y),
+                        (v(xr, y) - v(xl, y)) / (xr - xl).max(1) as f32,
+                        (v(x, yd) - v(x, yu)) / (yd - yu).max(1) as f32,
+                    ];
+                    assert_eq!(plane.data[y * w + x], want, "{w}×{h} at ({x}, {y})");
+                }
+            }
+        }
     }
 
     #[test]
