@@ -231,7 +231,11 @@ def test_resume_after_the_driver_is_killed(images, serial, tmp_path) -> None:
     assert_equals_serial(out, serial)
 
 
-def test_a_killed_local_worker_is_replaced_and_its_pairs_retried(images, serial, tmp_path):
+@pytest.mark.parametrize("settle", [0.0, 2.0], ids=["at-once", "pool-noticed"])
+def test_a_killed_local_worker_is_replaced_and_its_pairs_retried(images, serial, tmp_path, settle):
+    """``settle``: how long the callback waits after the kill. With 2 s the executor has
+    marked the pool broken before the driver submits its next chunk, so the break surfaces
+    in ``submit`` rather than in a result (the race CI once lost)."""
     folder, names = images
     pairs = good_pairs(names)
     killed: list[int] = []
@@ -241,6 +245,7 @@ def test_a_killed_local_worker_is_replaced_and_its_pairs_retried(images, serial,
             pid = int(r["worker"].rsplit(":", 1)[1])
             killed.append(pid)
             os.kill(pid, signal.SIGKILL)
+            time.sleep(settle)
 
     s = batch.run(
         pairs, folder, tmp_path, workers=2, chunk_size=1, on_result=kill_first_worker,

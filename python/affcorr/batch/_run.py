@@ -436,7 +436,18 @@ def _run_local(
             while (queue or inflight) and not broken:
                 while queue and len(inflight) < 2 * n:
                     chunk, attempt = queue.pop()
-                    inflight[pool.submit(_worker.process_chunk, config, chunk)] = (chunk, attempt)
+                    try:
+                        fut = pool.submit(_worker.process_chunk, config, chunk)
+                    except BrokenProcessPool:
+                        # The pool broke between two results (a worker died while the
+                        # last result was handled): this chunk never ran, so it goes
+                        # back unchanged, without spending one of its retries.
+                        queue.append((chunk, attempt))
+                        broken = True
+                        break
+                    inflight[fut] = (chunk, attempt)
+                if broken:
+                    break
                 finished, _ = wait(list(inflight), return_when=FIRST_COMPLETED)
                 for fut in finished:
                     chunk, attempt = inflight.pop(fut)
