@@ -78,6 +78,19 @@ pub const WEAK_RATIO: f64 = 0.6;
 /// (the right rotation of those pairs had 2–10× the wrong one's).
 pub const RIVAL_MARGIN: f64 = 1.5;
 
+/// A plain pair verified by fewer inliers than this share of the keypoint budget is verified
+/// only weakly too: a repetitive pattern matched at a wrong rotation can agree almost
+/// wholly with one F (the chessboard pairs of benches/results/views_pose.md rotated by 135°
+/// agreed 48 of 53, 81 of 123 and 96 of 157 at a wrong rotation; upright they had 138–222
+/// inliers at 1024 keypoints) and only the number of inliers tells them from the right one.
+pub const WEAK_YIELD: f64 = 0.1;
+
+/// A synthetic view (with its refinement) that verifies with fewer than this many times
+/// [`ViewOptions::min_inliers`] does not end an auto cascade: it is kept, and a later view
+/// replaces it with [`RIVAL_MARGIN`] times its inliers. A dozen matches that agree with
+/// some F are a weak proof on a zoom pair, where little of the other image is seen.
+pub const CONFIDENT_VIEW: usize = 2;
+
 /// Whether and how the pipeline synthesises views.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ViewMode {
@@ -370,11 +383,23 @@ pub struct ViewReport {
     pub screen: Option<usize>,
     /// Wall time: warping, matching, ACs and verification.
     pub time: Duration,
+    /// Whether its ACs are the result's (one view of a cascade; a verified view with the most
+    /// inliers is not used when it fell short of a rival's margin, [`RIVAL_MARGIN`]).
+    pub used: bool,
 }
 
-/// The rivals of a weakly verified plain pair: B rotated by 90°, 270° and 180°.
+/// The in-plane rotations of B (degrees) that the cascade tries: 45° steps, so that no
+/// rotation is more than 22.5° from one (the matchers hold about ±45°, but a pair matched
+/// 45° off gives fewer and less accurate matches than the upright pair: on the rotated
+/// non-planar pairs of benches/results/views_pose.md, 135° lost a fifth of what 90° and
+/// 180° solved while only the 90° steps were tried first).
+pub const ROTATIONS_DEG: [f64; 7] = [90.0, 270.0, 180.0, 45.0, 315.0, 135.0, 225.0];
+
+/// The rotated views of B ([`ROTATIONS_DEG`]): the cascade's first step, screened as one
+/// group (seven extractions of B, then the views matched best-screened first), and the
+/// rivals of a weakly verified plain pair.
 pub fn rival_views() -> Vec<ViewSpec> {
-    [90.0, 270.0, 180.0]
+    ROTATIONS_DEG
         .map(|r| ViewSpec::param(ViewImage::B, r, 1.0, 1.0, 0.0))
         .to_vec()
 }
@@ -391,17 +416,21 @@ pub enum Step {
     /// best-screened first; after [`screen_run`] of them the rest waits until every step has
     /// run, best over its group's noise first.
     Screened(Vec<ViewSpec>),
+    /// Views screened and matched like [`Step::Screened`]'s, best-screened first, but all of
+    /// them before the next step: for tiles, whose screen hardly tells the right one (the
+    /// zoomed image's content fills a ninth of a tile: on the 6× zoom pairs of
+    /// benches/results/views.md the right tile screened 10–17 against 8–13 for the others),
+    /// while a tile with nothing in it costs only its matching (a few dozen milliseconds).
+    Ranked(Vec<ViewSpec>),
 }
 
 /// The steps of the cascade in order (after the AC-guided view).
 pub fn cascade_steps() -> Vec<Step> {
     use ViewImage::{A, B};
-    let rotation = |r| ViewSpec::param(B, r, 1.0, 1.0, 0.0);
     let zoom = |image, s| ViewSpec::param(image, 0.0, s, 1.0, 0.0);
     let single = |v: Vec<ViewSpec>| v.into_iter().map(Step::View).collect::<Vec<_>>();
-    let mut steps = single(rival_views());
+    let mut steps = vec![Step::Screened(rival_views())];
     steps.extend(single(vec![zoom(A, 0.5), zoom(B, 0.5)]));
-    steps.extend(single([45.0, 315.0, 135.0, 225.0].map(rotation).to_vec()));
     steps.extend(single(vec![zoom(A, 0.25), zoom(B, 0.25)]));
     let tilts = |image, t: f64, n: usize| {
         (0..n).map(move |k| ViewSpec::param(image, 0.0, 1.0, t, 180.0 * k as f64 / n as f64))
@@ -434,8 +463,10 @@ pub fn cascade_steps() -> Vec<Step> {
             .chain(rotated_tilts(B, 2.0, 4))
             .collect(),
     ));
-    steps.push(Step::Screened(tiles(B).collect()));
-    steps.push(Step::Screened(tiles(A).collect()));
+    // The tiles of both images in one group: which image is the zoomed one is not known,
+    // and the screen ranks the 18 views together, so that the right tile of either image
+    // runs before the other image's group is reached.
+    steps.push(Step::Ranked(tiles(B).chain(tiles(A)).collect()));
     steps.push(Step::Screened(rotated_tilts(A, 4.0, 8).collect()));
     steps.push(Step::Screened(rotated_tilts(B, 4.0, 8).collect()));
     steps
@@ -447,7 +478,7 @@ pub fn candidate_views() -> Vec<ViewSpec> {
         .into_iter()
         .flat_map(|s| match s {
             Step::View(v) => vec![v],
-            Step::Screened(v) => v,
+            Step::Screened(v) | Step::Ranked(v) => v,
         })
         .collect()
 }
@@ -653,10 +684,11 @@ mod tests {
     #[test]
     fn candidates_cover_rotation_zoom_and_tilt_without_repeats() {
         let v = candidate_views();
-        assert_eq!(v.len(), 11 + 32 + 9 + 9 + 32 + 32);
+        assert_eq!(v.len(), 7 + 4 + 32 + 18 + 32 + 32);
         let labels: std::collections::BTreeSet<String> = v.iter().map(|s| s.label()).collect();
         assert_eq!(labels.len(), v.len());
         assert!(labels.contains("B rot 90°") && labels.contains("A zoom 0.25"));
+        assert!(labels.contains("B rot 135°") && labels.contains("B rot 315°"));
         assert!(
             labels.contains("B tilt 4 @157.5°") && labels.contains("A tilt 4 @22.5° + B rot 90°")
         );
