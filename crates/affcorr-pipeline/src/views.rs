@@ -9,10 +9,11 @@
 //!    rather than H, so that non-planar scenes verify. Points alone are not enough: a few
 //!    dozen wrong matches of a rotated pair often fit some F within 2 px, while their ACs
 //!    rarely fit it (benches/results/views.md has the measurement).
-//!    A pass that verifies only weakly (under [`WEAK_RATIO`] of its matches agree: a
-//!    repetitive pattern matched at the wrong rotation looks like this) is rivalled by B
-//!    rotated by 90°, 270° and 180° ([`rival_views`]); a rival with [`RIVAL_MARGIN`] times
-//!    its inliers replaces it.
+//!    A pass that verifies only weakly (under [`WEAK_RATIO`] of its matches agree, or fewer
+//!    inliers than [`WEAK_YIELD`] of the keypoint budget: a repetitive pattern matched at
+//!    the wrong rotation looks like this) is rivalled by B rotated in 45° steps
+//!    ([`rival_views`], screened; those that do not stand out are not matched); a rival with
+//!    [`RIVAL_MARGIN`] times its inliers replaces it.
 //! 2. If it fails (and [`ViewMode::Auto`]), synthetic views of one image are matched against
 //!    the other, in order, until one verifies ([`ViewMode::Full`] tries them all and keeps
 //!    the best), within [`ViewOptions::relative_budget`]:
@@ -22,13 +23,15 @@
 //!      than every guide so far, but too few to verify) puts the view that undoes *their*
 //!      dominant map at the front of the queue (up to three guided views a pair): a tilt view
 //!      that finds the right tilt but not the rotation leads to the view with both.
-//!    - in-plane **rotations** of B by 90°, 270°, 180° (the matchers hold up to about ±45°),
-//!      **zooms** of A or B by ½, the diagonal rotations, then zooms by ¼ (the matcher's
+//!    - in-plane **rotations** of B in 45° steps ([`ROTATIONS_DEG`], one screened group: the
+//!      matchers hold about ±45°, but a view 45° off gives fewer and worse matches than the
+//!      one that undoes the rotation), **zooms** of A or B by ½, then by ¼ (the matcher's
 //!      keypoint budget lands on the overlap);
 //!    - then **screened groups** ([`Step::Screened`], [`screen`]): tilts t = 2 (4 directions)
 //!      of A and of B, each against the other image as it is and rotated by 270°, 90° and
 //!      180° (a steep tilt of a rotated pair needs both undone); **tiles** of B (half its
-//!      size, magnified by 2, against A shrunk by ½: A a 4–8× zoom into B) and of A; tilts
+//!      size, magnified by 2, against A shrunk by ½: A a 3–6× zoom into B) and of A, one
+//!      group ranked by the screen but matched whole ([`Step::Ranked`]); tilts
 //!      t = 4 (8 directions) of A and of B against the rotations. A group extracts each of
 //!      its warped images once, ranks its views by XFeat's mutual nearest neighbours and a
 //!      homography's inliers (milliseconds, where LighterGlue and the ACs take hundreds),
@@ -36,7 +39,8 @@
 //!      until every step has run.
 //!    - a view that verifies with fewer than [`REFINE_BELOW`] × min_inliers is followed by
 //!      its refinement ([`refinement_view`], the view its inliers' map guides); the one with
-//!      more inliers is kept.
+//!      more inliers is kept. If that has fewer than [`CONFIDENT_VIEW`] × min_inliers, the
+//!      cascade goes on, and a view with [`RIVAL_MARGIN`] times its inliers replaces it.
 //! 3. Every AC of a view is mapped back to the original images with its A composed with the
 //!    synthetic warp ([`affcorr_image::ac_from_views`]), so the ACs are correct in the
 //!    original pixels whichever view produced them.
