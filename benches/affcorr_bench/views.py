@@ -1,14 +1,16 @@
 """The view cascade on rotated and zoomed copies of the evaluation's planar pairs.
 
     .venv/bin/python -m affcorr_bench.views [--images 1] [--max-keypoints 1024] [--threads 2]
-        [--families rotation,zoom] [--relative-budget default|none|K]
+        [--families rotation,zoom,zoomset] [--zoom-seeds 4] [--relative-budget default|none|K]
 
 Pairs: experiment 1's (affcorr_bench.eval.data.hpatches_pairs: graffiti 1->3 plus viewpoint and
 illumination sequences of held-out images, exact H), each with image B rotated about its centre
 by 0, 30, 90, 135 and 180 deg (the canvas grown to hold it), and the graffiti pair and every
 viewpoint pair's reference with image A a 2x, 4x and 6x zoom into its centre, into a point
 drawn at random in the middle half of the image (seeded per pair), and with image B zoomed
-into such a point instead. H follows each warp exactly.
+into such a point instead; and the zoom set (``zoomset``): every reference pair (graffiti and
+each held-out image's first viewpoint target) zoomed ``--zoom-seeds`` times by a factor drawn
+in 2-6x into a random centre, of A or of B (``zoom_set``). H follows each warp exactly.
 
 Each pair runs through affcorr.Pipeline twice, with views="off" and views="auto" (everything
 else the defaults but max_keypoints and threads), then affcorr's 2-AC homography RANSAC at the
@@ -33,7 +35,8 @@ from . import common
 
 ROTATIONS = (0, 30, 90, 135, 180)
 ZOOMS = (2, 4, 6)
-FAMILIES = ("rotation", "zoom")
+FAMILIES = ("rotation", "zoom", "zoomset")
+ZOOM_RANGE = (2.0, 6.0)  # the zoom set's factors: uniform in this range
 SUCCESS_PX = 10.0
 
 
@@ -88,7 +91,37 @@ def overlap_error(H: np.ndarray, gt: np.ndarray, img1: np.ndarray, img2: np.ndar
     return float(np.mean(d)) if np.all(np.isfinite(d)) else float("inf")
 
 
-def cases(images: int | None, families=FAMILIES):
+def zoom_set(seeds: int):
+    """The varied zoom set: (family, transformation, pair id, img1, img2, H) for each reference
+    pair (graffiti 1->3 and every viewpoint sequence's first target, all held-out images) and
+    seed: a zoom factor drawn uniformly in ZOOM_RANGE into a centre drawn in the middle 60% of
+    the image, of image A or image B (alternating with the seed), one generator per pair and
+    seed. Rows are labelled by the factor's band (2-4x, 4-6x)."""
+    from .eval import data
+
+    refs = [
+        p
+        for p in data.hpatches_pairs(images=None)
+        if p.kind != "illumination" and p.meta.get("k", 1) == 1
+    ]
+    for i, p in enumerate(refs):
+        for seed in range(seeds):
+            rng = np.random.default_rng([seed, i, 20])
+            z = float(rng.uniform(*ZOOM_RANGE))
+            centre = rng.uniform(0.2, 0.8, 2)
+            band = "2-4x" if z < 4 else "4-6x"
+            pid = f"{p.id}-s{seed}-{z:.1f}x"
+            if (seed + i) % 2 == 0:
+                Z = zoom_map(p.img1, z, centre)  # noqa: N806
+                a = zoomed(p.img1, Z)
+                yield "zoomset", f"random zoom {band}, A", pid, a, p.img2, p.H @ np.linalg.inv(Z)
+            else:
+                Z = zoom_map(p.img2, z, centre)  # noqa: N806
+                b = zoomed(p.img2, Z)
+                yield "zoomset", f"random zoom {band}, B", pid, p.img1, b, Z @ p.H
+
+
+def cases(images: int | None, families=FAMILIES, zoom_seeds: int = 4):
     """(family, transformation, pair id, img1, img2, H) for every case."""
     from .eval import data
 
@@ -98,9 +131,7 @@ def cases(images: int | None, families=FAMILIES):
             for r in ROTATIONS:
                 b, H = rotated(p.img2, p.H, r)
                 yield "rotation", f"B rotated {r}°", p.id, p.img1, b, H
-    if "zoom" not in families:
-        return
-    for i, p in enumerate(pairs):
+    for i, p in enumerate(pairs if "zoom" in families else []):
         if p.kind == "illumination" or (p.kind == "viewpoint" and p.meta.get("k", 1) != 1):
             continue
         rng = np.random.default_rng(i)
@@ -113,6 +144,8 @@ def cases(images: int | None, families=FAMILIES):
             Z = zoom_map(p.img2, z, rng.uniform(0.25, 0.75, 2))
             b = zoomed(p.img2, Z)
             yield "zoom", f"B zoomed {z}x off-centre", p.id, p.img1, b, Z @ p.H
+    if "zoomset" in families:
+        yield from zoom_set(zoom_seeds)
 
 
 def main(argv=None) -> None:
@@ -123,6 +156,9 @@ def main(argv=None) -> None:
     p.add_argument("--max-keypoints", type=int, default=1024)
     p.add_argument("--threads", type=int, default=2)
     p.add_argument("--families", default=",".join(FAMILIES), help="comma-separated")
+    p.add_argument(
+        "--zoom-seeds", type=int, default=4, help="the zoom set's cases per reference pair"
+    )
     p.add_argument(
         "--relative-budget",
         default="default",
@@ -151,7 +187,7 @@ def main(argv=None) -> None:
     }
     thr = PIPELINE_DEFAULTS["homography_threshold"]
     families = tuple(f.strip() for f in args.families.split(",") if f.strip())
-    all_cases = list(cases(args.images, families))
+    all_cases = list(cases(args.images, families, args.zoom_seeds))
     rows = []
     t0 = time.time()
     for family, what, pid, a, b, H in progress(all_cases, "views", "pair"):

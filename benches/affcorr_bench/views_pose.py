@@ -53,6 +53,12 @@ def main(argv=None) -> None:
     p.add_argument("--synthetic", type=int, default=20, help="rendered pairs")
     p.add_argument("--max-keypoints", type=int, default=1024)
     p.add_argument("--threads", type=int, default=2)
+    p.add_argument(
+        "--rotations",
+        default=",".join(map(str, ROTATIONS)),
+        help="comma-separated degrees (default: all)",
+    )
+    p.add_argument("--modes", default="off,auto", help="comma-separated views modes")
     p.add_argument("--out", default=str(common.RESULTS / "views_pose"))
     args = p.parse_args(argv)
 
@@ -63,12 +69,14 @@ def main(argv=None) -> None:
     from .eval import pose_data
 
     pairs = pose_data.synthetic_pairs(args.synthetic) + pose_data.chessboard_pairs()
+    rotations = [int(r) for r in args.rotations.split(",") if r.strip()]
+    modes = [m.strip() for m in args.modes.split(",") if m.strip()]
     pipes = {
         mode: affcorr.Pipeline(max_keypoints=args.max_keypoints, threads=args.threads, views=mode)
-        for mode in ("off", "auto")
+        for mode in modes
     }
     thr = PIPELINE_DEFAULTS["pose_threshold"]
-    cases = [(pp, r) for pp in pairs for r in ROTATIONS]
+    cases = [(pp, r) for pp in pairs for r in rotations]
     rows = []
     t0 = time.time()
     for pp, r in progress(cases, "views_pose", "pair"):
@@ -105,8 +113,9 @@ def main(argv=None) -> None:
     out = Path(args.out)
     common.write_csv(rows, out.with_suffix(".csv"))
     table = []
-    for r in ROTATIONS:
-        for mode in ("off", "auto"):
+    datasets = list(dict.fromkeys(x["dataset"] for x in rows))
+    for r in rotations:
+        for mode in modes:
             sel = [x for x in rows if x["rotation_deg"] == r and x["views"] == mode]
             used = Counter(x["view"] for x in sel if x["solved"] and x["view"] not in ("plain", ""))
             auc = pose_auc([x["pose_error_deg"] for x in sel])
@@ -115,6 +124,9 @@ def main(argv=None) -> None:
                     f"B rotated {r}°",
                     mode,
                     f"{sum(x['solved'] for x in sel)} / {len(sel)}",
+                    " / ".join(
+                        f"{sum(x['solved'] for x in sel if x['dataset'] == d)}" for d in datasets
+                    ),
                     *[100 * a for a in auc],
                     float(np.median([x["matches"] for x in sel])),
                     float(np.median([x["seconds"] for x in sel])),
@@ -145,6 +157,7 @@ def main(argv=None) -> None:
             "transformation",
             "views",
             "solved",
+            "solved per set (" + " / ".join(datasets) + ")",
             "AUC@5",
             "AUC@10",
             "AUC@20",

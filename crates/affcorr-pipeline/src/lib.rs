@@ -92,7 +92,7 @@ pub use grow::{GrowOptions, Grown};
 pub use pipeline::{MAX_WORKING_PIXELS, Pipeline};
 pub use result::{Estimated, Matches, Timings};
 pub use source::ImageSource;
-pub use views::{ViewMode, ViewOptions, ViewReport, ViewSpec};
+pub use views::{ViewImage, ViewMode, ViewOptions, ViewReport, ViewSpec};
 
 pub use affcorr_image::{AffineRefineOptions, GrayImage, RgbImage};
 pub use affcorr_ransac::EstimatorOptions;

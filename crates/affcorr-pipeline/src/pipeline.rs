@@ -31,9 +31,9 @@ use crate::grow::{GrowOptions, grow};
 use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
 use crate::views::{
-    REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec, WEAK_RATIO,
-    cascade_steps, guided_view, refinement_view, rival_views, screen, screen_run,
-    verified_fundamental, verify,
+    CONFIDENT_VIEW, REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec,
+    WEAK_RATIO, WEAK_YIELD, cascade_steps, guided_view, refinement_view, rival_views, screen,
+    screen_run, verified_fundamental, verify,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -680,14 +680,19 @@ impl Pipeline {
             verified,
             screen: None,
             time: start.elapsed(),
+            used: false,
         }];
         // A weak verification (few of the matches agree) may be a repetitive pattern matched
         // at the wrong rotation: the rotated views are its rivals (see `views::WEAK_RATIO`).
-        let weak = verified && (inliers as f64) < WEAK_RATIO * plain.corrs.len() as f64;
+        // So may one verified by few inliers (`views::WEAK_YIELD`).
+        let weak = verified
+            && ((inliers as f64) < WEAK_RATIO * plain.corrs.len() as f64
+                || (inliers as f64) < WEAK_YIELD * self.max_keypoints() as f64);
         if verified && !weak && o.mode == ViewMode::Auto {
+            reports[0].used = true;
             return Ok((plain, reports));
         }
-        let rival_floor = if weak && o.mode == ViewMode::Auto {
+        let mut rival_floor = if weak && o.mode == ViewMode::Auto {
             (RIVAL_MARGIN * inliers as f64).ceil() as usize
         } else {
             0
@@ -706,8 +711,9 @@ impl Pipeline {
             .map(|(r, _)| *r)
             .collect();
         let mut queue: VecDeque<(ViewSpec, Option<usize>)> = VecDeque::new();
-        let mut steps: VecDeque<Step> = if rival_floor > 0 {
-            rival_views().into_iter().map(Step::View).collect()
+        let rivals_only = rival_floor > 0;
+        let mut steps: VecDeque<Step> = if rivals_only {
+            VecDeque::from([Step::Screened(rival_views())])
         } else {
             let mut q: VecDeque<Step> = guided_view(&inlier_acs)
                 .map(Step::View)
@@ -719,6 +725,7 @@ impl Pipeline {
         // The views of screened groups past their best: tried once every step has run.
         let mut deferred: Vec<(f64, ViewSpec, Option<usize>)> = Vec::new();
         let (mut best, mut best_inliers) = (plain, if verified { inliers } else { 0 });
+        let mut best_index = 0;
         // A view whose matches partly agree (too few to verify) guides the next one: the
         // dominant map of its agreeing ACs, in the original images, is undone first.
         let (mut guide_inliers, mut guided) = (inlier_acs.len(), 0);
@@ -742,9 +749,10 @@ impl Pipeline {
             let (view, screen_score) = if let Some(v) = queue.pop_front() {
                 v
             } else if let Some(step) = steps.pop_front() {
+                let ranked_only = matches!(step, Step::Ranked(_));
                 match step {
                     Step::View(v) => (v, None),
-                    Step::Screened(group) => {
+                    Step::Screened(group) | Step::Ranked(group) => {
                         let t = Instant::now();
                         let mut scored = Vec::with_capacity(group.len());
                         for v in group {
@@ -764,12 +772,21 @@ impl Pipeline {
                         // Best first (stable: ties keep the steps' order).
                         scored.sort_by_key(|(_, s)| std::cmp::Reverse(*s));
                         let scores: Vec<usize> = scored.iter().filter_map(|v| v.1).collect();
-                        let rest = scored.split_off(screen_run(&scores));
+                        // A ranked group runs whole, best-screened first.
+                        let run = if ranked_only {
+                            scored.len()
+                        } else {
+                            screen_run(&scores)
+                        };
+                        let rest = scored.split_off(run);
                         queue.extend(scored);
-                        // Deferred views wait ranked by their screen over their group's noise.
+                        // Deferred views wait ranked by their screen over their group's noise;
+                        // a weakly verified pair's rivals that do not stand out are dropped:
+                        // they only check the plain pass, which is kept.
                         let noise = scores.get(scores.len() / 2).map_or(1, |&n| n.max(1));
                         deferred.extend(
                             rest.into_iter()
+                                .filter(|_| !rivals_only)
                                 .map(|(v, s)| (s.unwrap_or(0) as f64 / noise as f64, v, s)),
                         );
                         screen_time += t.elapsed();
@@ -848,28 +865,34 @@ impl Pipeline {
                 verified,
                 screen: screen_score,
                 time: t.elapsed() + std::mem::take(&mut screen_time),
+                used: false,
             });
             let better = verified && inliers > best_inliers && inliers >= rival_floor;
             if better {
+                best_index = reports.len() - 1;
                 best_inliers = inliers;
                 best = WorkMatches { corrs, ..m };
             }
-            if o.mode == ViewMode::Auto {
-                if refining {
+            if o.mode == ViewMode::Auto && (better || refining) {
+                // Few inliers: the view that undoes their map exactly may find many more.
+                if better
+                    && !refining
+                    && inliers < REFINE_BELOW * o.min_inliers
+                    && let Some(r) = refinement_view(&view, &agreeing)
+                {
+                    queue.push_front((r, None));
+                    refining = true;
+                    continue;
+                }
+                refining = false;
+                if best_inliers >= CONFIDENT_VIEW * o.min_inliers {
                     break;
                 }
-                if better {
-                    // Few inliers: the view that undoes their map exactly may find many more.
-                    match refinement_view(&view, &agreeing) {
-                        Some(r) if inliers < REFINE_BELOW * o.min_inliers => {
-                            queue.push_front((r, None));
-                            refining = true;
-                        }
-                        _ => break,
-                    }
-                }
+                // A weak proof (`views::CONFIDENT_VIEW`): kept, and rivalled by the views left.
+                rival_floor = rival_floor.max((RIVAL_MARGIN * best_inliers as f64).ceil() as usize);
             }
         }
+        reports[best_index].used = true;
         Ok((best, reports))
     }
 }

@@ -97,14 +97,10 @@ pub struct Matches {
 }
 
 impl Matches {
-    /// The view that produced these ACs: the verified one with the most inliers, else the
-    /// plain pair (`None` when the cascade did not run).
+    /// The view that produced these ACs ([`ViewReport::used`]; `None` when the cascade did
+    /// not run).
     pub fn view(&self) -> Option<&ViewReport> {
-        self.views
-            .iter()
-            .filter(|v| v.verified)
-            .max_by_key(|v| v.inliers)
-            .or(self.views.first())
+        self.views.iter().find(|v| v.used).or(self.views.first())
     }
 
     /// Keeps only the reliable ACs (all per-AC fields alike; an AC without a flag is dropped).

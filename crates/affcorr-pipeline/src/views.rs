@@ -9,10 +9,11 @@
 //!    rather than H, so that non-planar scenes verify. Points alone are not enough: a few
 //!    dozen wrong matches of a rotated pair often fit some F within 2 px, while their ACs
 //!    rarely fit it (benches/results/views.md has the measurement).
-//!    A pass that verifies only weakly (under [`WEAK_RATIO`] of its matches agree: a
-//!    repetitive pattern matched at the wrong rotation looks like this) is rivalled by B
-//!    rotated by 90°, 270° and 180° ([`rival_views`]); a rival with [`RIVAL_MARGIN`] times
-//!    its inliers replaces it.
+//!    A pass that verifies only weakly (under [`WEAK_RATIO`] of its matches agree, or fewer
+//!    inliers than [`WEAK_YIELD`] of the keypoint budget: a repetitive pattern matched at
+//!    the wrong rotation looks like this) is rivalled by B rotated in 45° steps
+//!    ([`rival_views`], screened; those that do not stand out are not matched); a rival with
+//!    [`RIVAL_MARGIN`] times its inliers replaces it.
 //! 2. If it fails (and [`ViewMode::Auto`]), synthetic views of one image are matched against
 //!    the other, in order, until one verifies ([`ViewMode::Full`] tries them all and keeps
 //!    the best), within [`ViewOptions::relative_budget`]:
@@ -22,13 +23,15 @@
 //!      than every guide so far, but too few to verify) puts the view that undoes *their*
 //!      dominant map at the front of the queue (up to three guided views a pair): a tilt view
 //!      that finds the right tilt but not the rotation leads to the view with both.
-//!    - in-plane **rotations** of B by 90°, 270°, 180° (the matchers hold up to about ±45°),
-//!      **zooms** of A or B by ½, the diagonal rotations, then zooms by ¼ (the matcher's
+//!    - in-plane **rotations** of B in 45° steps ([`ROTATIONS_DEG`], one screened group: the
+//!      matchers hold about ±45°, but a view 45° off gives fewer and worse matches than the
+//!      one that undoes the rotation), **zooms** of A or B by ½, then by ¼ (the matcher's
 //!      keypoint budget lands on the overlap);
 //!    - then **screened groups** ([`Step::Screened`], [`screen`]): tilts t = 2 (4 directions)
 //!      of A and of B, each against the other image as it is and rotated by 270°, 90° and
 //!      180° (a steep tilt of a rotated pair needs both undone); **tiles** of B (half its
-//!      size, magnified by 2, against A shrunk by ½: A a 4–8× zoom into B) and of A; tilts
+//!      size, magnified by 2, against A shrunk by ½: A a 3–6× zoom into B) and of A, one
+//!      group ranked by the screen but matched whole ([`Step::Ranked`]); tilts
 //!      t = 4 (8 directions) of A and of B against the rotations. A group extracts each of
 //!      its warped images once, ranks its views by XFeat's mutual nearest neighbours and a
 //!      homography's inliers (milliseconds, where LighterGlue and the ACs take hundreds),
@@ -36,7 +39,8 @@
 //!      until every step has run.
 //!    - a view that verifies with fewer than [`REFINE_BELOW`] × min_inliers is followed by
 //!      its refinement ([`refinement_view`], the view its inliers' map guides); the one with
-//!      more inliers is kept.
+//!      more inliers is kept. If that has fewer than [`CONFIDENT_VIEW`] × min_inliers, the
+//!      cascade goes on, and a view with [`RIVAL_MARGIN`] times its inliers replaces it.
 //! 3. Every AC of a view is mapped back to the original images with its A composed with the
 //!    synthetic warp ([`affcorr_image::ac_from_views`]), so the ACs are correct in the
 //!    original pixels whichever view produced them.
@@ -77,6 +81,19 @@ pub const WEAK_RATIO: f64 = 0.6;
 /// A rival view replaces a weakly verified plain pair only with this many times its inliers
 /// (the right rotation of those pairs had 2–10× the wrong one's).
 pub const RIVAL_MARGIN: f64 = 1.5;
+
+/// A plain pair verified by fewer inliers than this share of the keypoint budget is verified
+/// only weakly too: a repetitive pattern matched at a wrong rotation can agree almost
+/// wholly with one F (the chessboard pairs of benches/results/views_pose.md rotated by 135°
+/// agreed 48 of 53, 81 of 123 and 96 of 157 at a wrong rotation; upright they had 138–222
+/// inliers at 1024 keypoints) and only the number of inliers tells them from the right one.
+pub const WEAK_YIELD: f64 = 0.1;
+
+/// A synthetic view (with its refinement) that verifies with fewer than this many times
+/// [`ViewOptions::min_inliers`] does not end an auto cascade: it is kept, and a later view
+/// replaces it with [`RIVAL_MARGIN`] times its inliers. A dozen matches that agree with
+/// some F are a weak proof on a zoom pair, where little of the other image is seen.
+pub const CONFIDENT_VIEW: usize = 2;
 
 /// Whether and how the pipeline synthesises views.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -370,11 +387,23 @@ pub struct ViewReport {
     pub screen: Option<usize>,
     /// Wall time: warping, matching, ACs and verification.
     pub time: Duration,
+    /// Whether its ACs are the result's (one view of a cascade; a verified view with the most
+    /// inliers is not used when it fell short of a rival's margin, [`RIVAL_MARGIN`]).
+    pub used: bool,
 }
 
-/// The rivals of a weakly verified plain pair: B rotated by 90°, 270° and 180°.
+/// The in-plane rotations of B (degrees) that the cascade tries: 45° steps, so that no
+/// rotation is more than 22.5° from one (the matchers hold about ±45°, but a pair matched
+/// 45° off gives fewer and less accurate matches than the upright pair: on the rotated
+/// non-planar pairs of benches/results/views_pose.md, 135° lost a fifth of what 90° and
+/// 180° solved while only the 90° steps were tried first).
+pub const ROTATIONS_DEG: [f64; 7] = [90.0, 270.0, 180.0, 45.0, 315.0, 135.0, 225.0];
+
+/// The rotated views of B ([`ROTATIONS_DEG`]): the cascade's first step, screened as one
+/// group (seven extractions of B, then the views matched best-screened first), and the
+/// rivals of a weakly verified plain pair.
 pub fn rival_views() -> Vec<ViewSpec> {
-    [90.0, 270.0, 180.0]
+    ROTATIONS_DEG
         .map(|r| ViewSpec::param(ViewImage::B, r, 1.0, 1.0, 0.0))
         .to_vec()
 }
@@ -391,17 +420,21 @@ pub enum Step {
     /// best-screened first; after [`screen_run`] of them the rest waits until every step has
     /// run, best over its group's noise first.
     Screened(Vec<ViewSpec>),
+    /// Views screened and matched like [`Step::Screened`]'s, best-screened first, but all of
+    /// them before the next step: for tiles, whose screen hardly tells the right one (the
+    /// zoomed image's content fills a ninth of a tile: on the 6× zoom pairs of
+    /// benches/results/views.md the right tile screened 10–17 against 8–13 for the others),
+    /// while a tile with nothing in it costs only its matching (a few dozen milliseconds).
+    Ranked(Vec<ViewSpec>),
 }
 
 /// The steps of the cascade in order (after the AC-guided view).
 pub fn cascade_steps() -> Vec<Step> {
     use ViewImage::{A, B};
-    let rotation = |r| ViewSpec::param(B, r, 1.0, 1.0, 0.0);
     let zoom = |image, s| ViewSpec::param(image, 0.0, s, 1.0, 0.0);
     let single = |v: Vec<ViewSpec>| v.into_iter().map(Step::View).collect::<Vec<_>>();
-    let mut steps = single(rival_views());
+    let mut steps = vec![Step::Screened(rival_views())];
     steps.extend(single(vec![zoom(A, 0.5), zoom(B, 0.5)]));
-    steps.extend(single([45.0, 315.0, 135.0, 225.0].map(rotation).to_vec()));
     steps.extend(single(vec![zoom(A, 0.25), zoom(B, 0.25)]));
     let tilts = |image, t: f64, n: usize| {
         (0..n).map(move |k| ViewSpec::param(image, 0.0, 1.0, t, 180.0 * k as f64 / n as f64))
@@ -434,8 +467,10 @@ pub fn cascade_steps() -> Vec<Step> {
             .chain(rotated_tilts(B, 2.0, 4))
             .collect(),
     ));
-    steps.push(Step::Screened(tiles(B).collect()));
-    steps.push(Step::Screened(tiles(A).collect()));
+    // The tiles of both images in one group: which image is the zoomed one is not known,
+    // and the screen ranks the 18 views together, so that the right tile of either image
+    // runs before the other image's group is reached.
+    steps.push(Step::Ranked(tiles(B).chain(tiles(A)).collect()));
     steps.push(Step::Screened(rotated_tilts(A, 4.0, 8).collect()));
     steps.push(Step::Screened(rotated_tilts(B, 4.0, 8).collect()));
     steps
@@ -447,7 +482,7 @@ pub fn candidate_views() -> Vec<ViewSpec> {
         .into_iter()
         .flat_map(|s| match s {
             Step::View(v) => vec![v],
-            Step::Screened(v) => v,
+            Step::Screened(v) | Step::Ranked(v) => v,
         })
         .collect()
 }
@@ -653,10 +688,11 @@ mod tests {
     #[test]
     fn candidates_cover_rotation_zoom_and_tilt_without_repeats() {
         let v = candidate_views();
-        assert_eq!(v.len(), 11 + 32 + 9 + 9 + 32 + 32);
+        assert_eq!(v.len(), 7 + 4 + 32 + 18 + 32 + 32);
         let labels: std::collections::BTreeSet<String> = v.iter().map(|s| s.label()).collect();
         assert_eq!(labels.len(), v.len());
         assert!(labels.contains("B rot 90°") && labels.contains("A zoom 0.25"));
+        assert!(labels.contains("B rot 135°") && labels.contains("B rot 315°"));
         assert!(
             labels.contains("B tilt 4 @157.5°") && labels.contains("A tilt 4 @22.5° + B rot 90°")
         );
