@@ -5,7 +5,8 @@ cd "$(dirname "$0")/.."
 AFFCORR_WITH_TORCH=1 bash scripts/setup.sh
 # The evaluation suite's peers (OpenCV, pyhesaff, LightGlue; benches/eval/setup.sh), so that its
 # smoke tests run rather than skip; a peer that cannot be installed is listed, not fatal. It also
-# exports the models that are made at setup time (DISK + LightGlue, docs/matchers.md), which the
+# exports the models that are made at setup time (DISK + LightGlue and ALIKED + LightGlue,
+# docs/matchers.md), which the
 # Rust and Python tests below then require (AFFCORR_REQUIRE_EXPORTED_MODELS: a missing one fails
 # instead of skipping).
 bash benches/eval/setup.sh

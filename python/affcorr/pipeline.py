@@ -178,9 +178,11 @@ class Pipeline:
             correct matches, but its cost grows with ``max_keypoints`` squared), ``"xfeat"``
             (mutual nearest neighbours, fastest), ``"xfeat-star"`` (semi-dense XFeat* with
             sub-pixel refinement), ``"disk-lightglue"`` (DISK keypoints matched by LightGlue,
-            with its adaptive depth and width; the models are not shipped but made at setup
-            time by ``python -m affcorr.export.lightglue_models -o python/affcorr/models``,
-            docs/matchers.md) or ``"dense"`` (a ``dense-warp-v1`` model, ``dense_model``).
+            with its adaptive depth and width), ``"aliked-lightglue"`` (ALIKED keypoints
+            matched by LightGlue, the same loop; for both the models are not shipped but made
+            at setup time by ``python -m affcorr.export.lightglue_models -o
+            python/affcorr/models``, docs/matchers.md) or ``"dense"`` (a ``dense-warp-v1``
+            model, ``dense_model``).
             ``None``: ``"dense"`` when ``dense_model`` is given, else the default
             (``PIPELINE_DEFAULTS["matcher"]``).
         max_keypoints: keypoints per image (semi-dense cells for ``"xfeat-star"``; unused by
@@ -195,6 +197,8 @@ class Pipeline:
         models_dir: a directory with ``xfeat_backbone.onnx``, ``xfeat_refine.onnx`` and
             ``xfeat_lighterglue.onnx`` (the ones the matcher needs; ``disk_backbone.onnx`` and
             ``disk_lightglue_{encode,layer,assign}.onnx`` for ``"disk-lightglue"``;
+            ``aliked_backbone.onnx``, ``aliked_sddh.onnx`` and
+            ``aliked_lightglue_{encode,layer,assign}.onnx`` for ``"aliked-lightglue"``;
             ``dense.onnx`` for ``"dense"`` without ``dense_model``); ``None``: the bundled models
             (``affcorr/models``).
         dense_model: a ``dense-warp-v1`` ONNX file (docs/matchers.md says how to export DKM or
@@ -327,8 +331,8 @@ class Pipeline:
 
     @property
     def matcher(self) -> str:
-        """``"xfeat"``, ``"xfeat-star"``, ``"xfeat-lighterglue"``, ``"disk-lightglue"`` or
-        ``"dense"``."""
+        """``"xfeat"``, ``"xfeat-star"``, ``"xfeat-lighterglue"``, ``"disk-lightglue"``,
+        ``"aliked-lightglue"`` or ``"dense"``."""
         return self._runner.matcher
 
     @property

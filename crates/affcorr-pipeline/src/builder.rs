@@ -26,6 +26,12 @@ pub const DISK_BACKBONE_FILE: &str = "disk_backbone.onnx";
 /// DISK's LightGlue: the name its pieces `disk_lightglue_{encode,layer,assign}.onnx` derive
 /// from (no file of this name exists).
 pub const DISK_LIGHTGLUE_FILE: &str = "disk_lightglue.onnx";
+/// The ALIKED backbone's file name (not shipped: `affcorr_runner::disk::EXPORT_COMMAND` makes
+/// it); its SDDH descriptor head `aliked_sddh.onnx` lies beside it.
+pub const ALIKED_BACKBONE_FILE: &str = "aliked_backbone.onnx";
+/// ALIKED's LightGlue: the name its pieces `aliked_lightglue_{encode,layer,assign}.onnx` derive
+/// from (no file of this name exists).
+pub const ALIKED_LIGHTGLUE_FILE: &str = "aliked_lightglue.onnx";
 /// The shape network's file name.
 pub const SHAPE_FILE: &str = "shape.onnx";
 /// A dense matcher's file name in a models directory (none is shipped: DKM/RoMa exports are
@@ -41,6 +47,8 @@ pub fn model_file(role: ModelRole) -> &'static str {
         ModelRole::Dense => DENSE_FILE,
         ModelRole::DiskBackbone => DISK_BACKBONE_FILE,
         ModelRole::DiskLightGlue => DISK_LIGHTGLUE_FILE,
+        ModelRole::AlikedBackbone => ALIKED_BACKBONE_FILE,
+        ModelRole::AlikedLightGlue => ALIKED_LIGHTGLUE_FILE,
     }
 }
 
@@ -55,6 +63,8 @@ pub struct PipelineBuilder {
     dense: Option<PathBuf>,
     disk_backbone: Option<PathBuf>,
     disk_lightglue: Option<PathBuf>,
+    aliked_backbone: Option<PathBuf>,
+    aliked_lightglue: Option<PathBuf>,
     shape: Option<PathBuf>,
     max_keypoints: Option<usize>,
     max_matches: Option<usize>,
@@ -79,6 +89,8 @@ impl Default for PipelineBuilder {
             dense: None,
             disk_backbone: None,
             disk_lightglue: None,
+            aliked_backbone: None,
+            aliked_lightglue: None,
             shape: None,
             max_keypoints: None,
             max_matches: None,
@@ -103,8 +115,9 @@ impl PipelineBuilder {
 
     /// A directory holding `xfeat_backbone.onnx`, `xfeat_refine.onnx`, `xfeat_lighterglue.onnx`
     /// and `shape.onnx` (in the repository: `python/affcorr/models`), and for
-    /// [`Matcher::DiskLightGlue`] `disk_backbone.onnx` and `disk_lightglue_*.onnx` (exported
-    /// there at setup time, docs/matchers.md). Paths set one by one
+    /// [`Matcher::DiskLightGlue`] `disk_backbone.onnx` and `disk_lightglue_*.onnx`, for
+    /// [`Matcher::AlikedLightGlue`] `aliked_backbone.onnx`, `aliked_sddh.onnx` and
+    /// `aliked_lightglue_*.onnx` (exported there at setup time, docs/matchers.md). Paths set one by one
     /// take precedence. There is no default: the Rust API takes explicit paths.
     pub fn models_dir(mut self, dir: impl Into<PathBuf>) -> Self {
         self.models_dir = Some(dir.into());
@@ -140,6 +153,21 @@ impl PipelineBuilder {
     /// [`Matcher::DiskLightGlue`]).
     pub fn disk_lightglue_model(mut self, path: impl Into<PathBuf>) -> Self {
         self.disk_lightglue = Some(path.into());
+        self
+    }
+
+    /// The ALIKED backbone (`features-aliked-v1`; only [`Matcher::AlikedLightGlue`]); its
+    /// SDDH head `aliked_sddh.onnx` must lie beside it.
+    pub fn aliked_backbone_model(mut self, path: impl Into<PathBuf>) -> Self {
+        self.aliked_backbone = Some(path.into());
+        self
+    }
+
+    /// ALIKED's LightGlue, as `<dir>/aliked_lightglue.onnx`: its three pieces
+    /// `aliked_lightglue_{encode,layer,assign}.onnx` must lie beside that path (only
+    /// [`Matcher::AlikedLightGlue`]).
+    pub fn aliked_lightglue_model(mut self, path: impl Into<PathBuf>) -> Self {
+        self.aliked_lightglue = Some(path.into());
         self
     }
 
@@ -255,6 +283,8 @@ impl PipelineBuilder {
             ModelRole::Dense => (&self.dense, "dense_matcher"),
             ModelRole::DiskBackbone => (&self.disk_backbone, "disk_backbone_model"),
             ModelRole::DiskLightGlue => (&self.disk_lightglue, "disk_lightglue_model"),
+            ModelRole::AlikedBackbone => (&self.aliked_backbone, "aliked_backbone_model"),
+            ModelRole::AlikedLightGlue => (&self.aliked_lightglue, "aliked_lightglue_model"),
         };
         self.path(explicit, model_file(role), what)
     }
@@ -294,6 +324,8 @@ impl PipelineBuilder {
                 ModelRole::Dense => files.dense = path,
                 ModelRole::DiskBackbone => files.disk_backbone = path,
                 ModelRole::DiskLightGlue => files.disk_lightglue = path,
+                ModelRole::AlikedBackbone => files.aliked_backbone = path,
+                ModelRole::AlikedLightGlue => files.aliked_lightglue = path,
             }
         }
         // A dense matcher draws `max_matches` and keeps them all.

@@ -242,7 +242,10 @@ impl Features {
                 | (FeatureData::SemiDense(_), Matcher::XFeatStar)
                 | (
                     FeatureData::Sparse(_),
-                    Matcher::XFeatMnn | Matcher::XFeatLighterGlue | Matcher::DiskLightGlue
+                    Matcher::XFeatMnn
+                        | Matcher::XFeatLighterGlue
+                        | Matcher::DiskLightGlue
+                        | Matcher::AlikedLightGlue
                 )
         );
         if !consistent || r.pos != data.len() {

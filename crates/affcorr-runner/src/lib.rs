@@ -9,6 +9,8 @@
 //! - [`estimator`]: the ACs A = S_AB · R(O_AB) · A′(A″) of matched points.
 //! - [`features`]: the XFeat backbone (`features-backbone-v1`) and sparse / semi-dense feature
 //!   extraction from its maps (the specification is `python/affcorr/export/xfeat_reference.py`).
+//! - [`aliked`]: the ALIKED backbone (`features-aliked-v1`), ALIKED's keypoint detection (DKD)
+//!   and its SDDH descriptor head (the specification is `python/affcorr/export/aliked.py`).
 //! - [`disk`]: the DISK backbone (`features-disk-v1`) and DISK's detection and descriptor
 //!   sampling (the specification is `python/affcorr/export/lightglue_models.py`).
 //! - [`matching`]: mutual nearest neighbours, the XFeat* refinement model and LighterGlue.
@@ -41,6 +43,7 @@
 //! # Ok::<(), affcorr_runner::RunnerError>(())
 //! ```
 
+pub mod aliked;
 pub mod contract;
 pub mod dense;
 pub mod disk;
@@ -58,6 +61,7 @@ pub use estimator::{ShapeEstimate, ShapeEstimator};
 pub use ort_env::{init_ort, ort_library};
 pub use shape::{ShapeBins, ShapeModel, ShapeModelOptions, ShapeOutputs, ShapePrediction};
 
+pub use aliked::{AlikedBackbone, AlikedConfig};
 pub use contract::resolve_threads;
 pub use dense::{DenseMatcher, DenseSample, DenseWarp, SamplingOptions, balanced_sample};
 pub use disk::{DiskBackbone, DiskConfig};

@@ -7,6 +7,7 @@
 //! | `"xfeat-star"` | backbone at scales 0.6 and 1.3, MNN, refinement MLP | refinement confidence |
 //! | `"xfeat-lighterglue"` | backbone, LighterGlue | match score |
 //! | `"disk-lightglue"` | DISK backbone, LightGlue in pieces (adaptive loop) | match score |
+//! | `"aliked-lightglue"` | ALIKED backbone + SDDH head, LightGlue in pieces (adaptive loop) | match score |
 //! | `"dense"` | a `dense-warp-v1` model (DKM, RoMa), DKM's balanced sampling | the model's |
 //!
 //! Points are in pixels of the images given (pixel centres at integers); the caller orders,
@@ -19,8 +20,9 @@ use std::time::{Duration, Instant};
 
 use affcorr_image::{GrayImage, RgbImage};
 
+use crate::aliked::AlikedBackbone;
 use crate::dense::{DenseMatcher, SamplingOptions, balanced_sample};
-use crate::disk::{DiskBackbone, with_export_hint};
+use crate::disk::{DiskBackbone, export_hint};
 use crate::error::{Result, RunnerError};
 use crate::features::{
     Backbone, DenseFeatures, SparseFeatures, dense_split, detect_and_compute, plane, preprocess,
@@ -47,6 +49,10 @@ pub enum Matcher {
     /// DISK keypoints (`features-disk-v1`) matched by LightGlue's adaptive loop
     /// (`"disk-lightglue"`; models made by [`crate::disk::EXPORT_COMMAND`], not shipped).
     DiskLightGlue,
+    /// ALIKED keypoints (`features-aliked-v1` + `features-aliked-sddh-v1`) matched by
+    /// LightGlue's adaptive loop (`"aliked-lightglue"`; models made by
+    /// [`crate::disk::EXPORT_COMMAND`], not shipped).
+    AlikedLightGlue,
 }
 
 /// A model a matcher runs.
@@ -66,21 +72,30 @@ pub enum ModelRole {
     /// `disk_lightglue_{encode,layer,assign}.onnx` beside it ([`GluePieceFiles::beside`]; there
     /// is no one-graph file).
     DiskLightGlue,
+    /// The ALIKED backbone (`features-aliked-v1`); its SDDH descriptor head
+    /// (`features-aliked-sddh-v1`) is `aliked_sddh.onnx` beside it
+    /// ([`crate::aliked::sddh_path`]).
+    AlikedBackbone,
+    /// ALIKED's LightGlue: `<dir>/aliked_lightglue.onnx` names its pieces
+    /// `aliked_lightglue_{encode,layer,assign}.onnx` beside it.
+    AlikedLightGlue,
 }
 
 impl ModelRole {
     /// Every role.
-    pub const ALL: [ModelRole; 6] = [
+    pub const ALL: [ModelRole; 8] = [
         Self::Backbone,
         Self::Refine,
         Self::LighterGlue,
         Self::Dense,
         Self::DiskBackbone,
         Self::DiskLightGlue,
+        Self::AlikedBackbone,
+        Self::AlikedLightGlue,
     ];
 
     /// The name of the role in APIs (`"backbone"`, `"refine"`, `"lighterglue"`, `"dense"`,
-    /// `"disk_backbone"`, `"disk_lightglue"`).
+    /// `"disk_backbone"`, `"disk_lightglue"`, `"aliked_backbone"`, `"aliked_lightglue"`).
     pub fn name(self) -> &'static str {
         match self {
             Self::Backbone => "backbone",
@@ -89,18 +104,21 @@ impl ModelRole {
             Self::Dense => "dense",
             Self::DiskBackbone => "disk_backbone",
             Self::DiskLightGlue => "disk_lightglue",
+            Self::AlikedBackbone => "aliked_backbone",
+            Self::AlikedLightGlue => "aliked_lightglue",
         }
     }
 }
 
 impl Matcher {
     /// Every matcher.
-    pub const ALL: [Matcher; 5] = [
+    pub const ALL: [Matcher; 6] = [
         Self::XFeatLighterGlue,
         Self::XFeatMnn,
         Self::XFeatStar,
         Self::Dense,
         Self::DiskLightGlue,
+        Self::AlikedLightGlue,
     ];
 
     /// The name used by the Python API and the CLI.
@@ -111,6 +129,7 @@ impl Matcher {
             Self::XFeatLighterGlue => "xfeat-lighterglue",
             Self::Dense => "dense",
             Self::DiskLightGlue => "disk-lightglue",
+            Self::AlikedLightGlue => "aliked-lightglue",
         }
     }
 
@@ -122,6 +141,7 @@ impl Matcher {
             Self::XFeatLighterGlue => &[ModelRole::Backbone, ModelRole::LighterGlue],
             Self::Dense => &[ModelRole::Dense],
             Self::DiskLightGlue => &[ModelRole::DiskBackbone, ModelRole::DiskLightGlue],
+            Self::AlikedLightGlue => &[ModelRole::AlikedBackbone, ModelRole::AlikedLightGlue],
         }
     }
 }
@@ -137,7 +157,7 @@ impl FromStr for Matcher {
 
     /// `"xfeat"` (also `"xfeat-mnn"`), `"xfeat-star"` (`"xfeat*"`), `"xfeat-lighterglue"`
     /// (`"lighterglue"`), `"dense"` (`"dense-warp"`), `"disk-lightglue"` (`"disk"`),
-    /// case-insensitive.
+    /// `"aliked-lightglue"` (`"aliked"`), case-insensitive.
     fn from_str(s: &str) -> Result<Self> {
         match s.to_ascii_lowercase().replace('_', "-").as_str() {
             "xfeat" | "xfeat-mnn" => Ok(Self::XFeatMnn),
@@ -145,6 +165,7 @@ impl FromStr for Matcher {
             "xfeat-lighterglue" | "lighterglue" => Ok(Self::XFeatLighterGlue),
             "dense" | "dense-warp" => Ok(Self::Dense),
             "disk-lightglue" | "disk" => Ok(Self::DiskLightGlue),
+            "aliked-lightglue" | "aliked" => Ok(Self::AlikedLightGlue),
             _ => Err(RunnerError::invalid(
                 "matcher",
                 format!(
@@ -171,6 +192,10 @@ pub struct MatcherFiles {
     pub disk_backbone: Option<PathBuf>,
     /// DISK's LightGlue (`<dir>/disk_lightglue.onnx`: its pieces lie beside that path).
     pub disk_lightglue: Option<PathBuf>,
+    /// The ALIKED backbone (its SDDH head `aliked_sddh.onnx` lies beside it).
+    pub aliked_backbone: Option<PathBuf>,
+    /// ALIKED's LightGlue (`<dir>/aliked_lightglue.onnx`: its pieces lie beside that path).
+    pub aliked_lightglue: Option<PathBuf>,
 }
 
 impl MatcherFiles {
@@ -183,6 +208,8 @@ impl MatcherFiles {
             ModelRole::Dense => self.dense.as_ref(),
             ModelRole::DiskBackbone => self.disk_backbone.as_ref(),
             ModelRole::DiskLightGlue => self.disk_lightglue.as_ref(),
+            ModelRole::AlikedBackbone => self.aliked_backbone.as_ref(),
+            ModelRole::AlikedLightGlue => self.aliked_lightglue.as_ref(),
         }
     }
 }
@@ -222,7 +249,8 @@ pub struct PointMatches {
 /// ([`PointMatcher::match_features`]), with the results of [`PointMatcher::match_images`].
 #[derive(Debug, Clone, PartialEq)]
 pub enum FeatureData {
-    /// Sparse keypoints and descriptors (`"xfeat"`, `"xfeat-lighterglue"`, `"disk-lightglue"`).
+    /// Sparse keypoints and descriptors (`"xfeat"`, `"xfeat-lighterglue"`, `"disk-lightglue"`,
+    /// `"aliked-lightglue"`).
     Sparse(SparseFeatures),
     /// The semi-dense cells of XFeat* at both scales (`"xfeat-star"`).
     SemiDense(DenseFeatures),
@@ -276,6 +304,7 @@ pub struct PointMatcher {
     kind: Matcher,
     backbone: Option<Backbone>,
     disk: Option<DiskBackbone>,
+    aliked: Option<AlikedBackbone>,
     refine: Option<RefineModel>,
     lighterglue: Option<LighterGlue>,
     dense: Option<DenseMatcher>,
@@ -335,11 +364,22 @@ impl PointMatcher {
         } else {
             None
         };
-        let dim = match (&backbone, &disk) {
-            (Some(b), _) => b.config().descriptor_dim,
-            (None, Some(d)) => d.config().descriptor_dim,
-            (None, None) => 0,
+        let aliked = if needs(ModelRole::AlikedBackbone) {
+            Some(AlikedBackbone::load(
+                file(ModelRole::AlikedBackbone, "aliked_backbone_model")?,
+                Some(threads),
+            )?)
+        } else {
+            None
         };
+        // (descriptor length, default keypoint budget) of the sparse backbone
+        let sparse = match (&backbone, &disk, &aliked) {
+            (Some(b), _, _) => Some((b.config().descriptor_dim, b.config().top_k)),
+            (None, Some(d), _) => Some((d.config().descriptor_dim, d.config().top_k)),
+            (None, None, Some(a)) => Some((a.config().descriptor_dim, a.config().top_k)),
+            (None, None, None) => None,
+        };
+        let dim = sparse.map_or(0, |s| s.0);
         let refine = if needs(ModelRole::Refine) {
             let r = RefineModel::load(file(ModelRole::Refine, "refine_model")?, Some(threads))?;
             check_dim("refine_model", r.source(), r.dim(), dim)?;
@@ -354,24 +394,36 @@ impl PointMatcher {
             )?;
             check_dim("lighterglue_model", g.source(), g.dim(), dim)?;
             Some(g)
-        } else if needs(ModelRole::DiskLightGlue) {
-            // Only the pieces exist (no one-graph LightGlue is exported for DISK); the
-            // environment's depth/width overrides apply as for LighterGlue.
-            let pieces =
-                GluePieceFiles::beside(file(ModelRole::DiskLightGlue, "disk_lightglue_model")?);
+        } else if let Some((role, what, hint)) = [
+            (
+                ModelRole::DiskLightGlue,
+                "disk_lightglue_model",
+                "DISK + LightGlue",
+            ),
+            (
+                ModelRole::AlikedLightGlue,
+                "aliked_lightglue_model",
+                "ALIKED + LightGlue",
+            ),
+        ]
+        .into_iter()
+        .find(|(role, _, _)| needs(*role))
+        {
+            // Only the pieces exist (no one-graph LightGlue is exported for DISK or ALIKED);
+            // the environment's depth/width overrides apply as for LighterGlue.
+            let pieces = GluePieceFiles::beside(file(role, what)?);
             let g =
                 LighterGlue::load_pieces(&pieces, Some(threads), &LighterGlueOptions::from_env()?)
-                    .map_err(with_export_hint)?;
-            check_dim("disk_lightglue_model", g.source(), g.dim(), dim)?;
+                    .map_err(|e| export_hint(e, hint))?;
+            check_dim(what, g.source(), g.dim(), dim)?;
             Some(g)
         } else {
             None
         };
-        let max_keypoints = match (&backbone, &disk, max_keypoints) {
-            (_, _, Some(n)) => n,
-            (Some(b), _, None) => b.config().top_k,
-            (None, Some(d), None) => d.config().top_k,
-            (None, None, None) => {
+        let max_keypoints = match (sparse, max_keypoints) {
+            (_, Some(n)) => n,
+            (Some((_, top_k)), None) => top_k,
+            (None, None) => {
                 return Err(RunnerError::invalid(
                     "max_keypoints",
                     "a dense matcher needs the number of matches to draw",
@@ -382,6 +434,7 @@ impl PointMatcher {
             kind,
             backbone,
             disk,
+            aliked,
             refine,
             lighterglue,
             dense,
@@ -405,7 +458,7 @@ impl PointMatcher {
         self.seed
     }
 
-    /// The XFeat backbone (`None` for a dense matcher and DISK).
+    /// The XFeat backbone (`None` for a dense matcher, DISK and ALIKED).
     pub fn backbone(&self) -> Option<&Backbone> {
         self.backbone.as_ref()
     }
@@ -415,7 +468,12 @@ impl PointMatcher {
         self.disk.as_ref()
     }
 
-    /// The LightGlue of the matcher (LighterGlue for XFeat, LightGlue for DISK; `None` for
+    /// The ALIKED backbone (`Some` for [`Matcher::AlikedLightGlue`]).
+    pub fn aliked_backbone(&self) -> Option<&AlikedBackbone> {
+        self.aliked.as_ref()
+    }
+
+    /// The LightGlue of the matcher (LighterGlue for XFeat, LightGlue for DISK and ALIKED; `None` for
     /// the others).
     pub fn glue(&self) -> Option<&LighterGlue> {
         self.lighterglue.as_ref()
@@ -469,6 +527,18 @@ impl PointMatcher {
                     .expect("DISK matchers load the DISK backbone");
                 let (data, h, w) = plane(img);
                 let (f, t) = disk.extract(data, h, w, self.max_keypoints)?;
+                timings.preprocess += t.preprocess;
+                timings.network += t.network;
+                timings.detection += t.detection;
+                FeatureData::Sparse(f)
+            }
+            Matcher::AlikedLightGlue => {
+                let aliked = self
+                    .aliked
+                    .as_ref()
+                    .expect("ALIKED matchers load the ALIKED backbone");
+                let (data, h, w) = plane(img);
+                let (f, t) = aliked.extract(data, h, w, self.max_keypoints)?;
                 timings.preprocess += t.preprocess;
                 timings.network += t.network;
                 timings.detection += t.detection;
@@ -730,11 +800,18 @@ mod tests {
         for m in Matcher::ALL.into_iter().filter(|&m| m != Matcher::Dense) {
             let first = m.models()[0];
             assert!(
-                first == ModelRole::Backbone || first == ModelRole::DiskBackbone,
+                matches!(
+                    first,
+                    ModelRole::Backbone | ModelRole::DiskBackbone | ModelRole::AlikedBackbone
+                ),
                 "{m}"
             );
         }
         assert_eq!("DISK".parse::<Matcher>().unwrap(), Matcher::DiskLightGlue);
+        assert_eq!(
+            "ALIKED".parse::<Matcher>().unwrap(),
+            Matcher::AlikedLightGlue
+        );
         let files = MatcherFiles::default();
         for m in Matcher::ALL {
             let e = PointMatcher::load(m, &files, Some(10), 0, 1).unwrap_err();

@@ -14,8 +14,6 @@
 
 mod common;
 
-use affcorr_geom::{Mat3, Vec3};
-use affcorr_image::GrayImage;
 use affcorr_runner::disk::EXPORT_COMMAND;
 use affcorr_runner::{GlueConfig, Matcher, MatcherFiles, PointMatcher, RunnerError};
 
@@ -32,25 +30,15 @@ fn files(dir: &std::path::Path) -> MatcherFiles {
 /// The matcher over the exported models, or `None` (with a note) when they are absent and not
 /// required.
 fn matcher() -> Option<PointMatcher> {
-    common::init();
-    let dir = affcorr_devtools::models_dir();
-    if !dir.join("disk_lightglue_layer.onnx").is_file() {
-        let required = std::env::var("AFFCORR_REQUIRE_EXPORTED_MODELS").is_ok_and(|v| v == "1");
-        assert!(
-            !required,
-            "the DISK + LightGlue models are missing from {}: run `{EXPORT_COMMAND}`",
-            dir.display()
-        );
-        eprintln!(
-            "note: DISK + LightGlue not exported ({EXPORT_COMMAND}); disk_lightglue tests not run"
-        );
+    if !common::exported(
+        "disk_lightglue_layer.onnx",
+        "DISK + LightGlue",
+        EXPORT_COMMAND,
+    ) {
         return None;
     }
+    let dir = affcorr_devtools::models_dir();
     Some(PointMatcher::load(Matcher::DiskLightGlue, &files(&dir), Some(TOP_K), 0, 2).unwrap())
-}
-
-fn image(name: &str) -> GrayImage {
-    GrayImage::open(common::root().join("data/graffiti").join(name)).unwrap()
 }
 
 #[test]
@@ -68,7 +56,7 @@ fn disk_lightglue_matches_graffiti_along_its_homography() {
             width_confidence: 0.99
         })
     );
-    let (a, b) = (image("graf1.png"), image("graf3.png"));
+    let (a, b) = (common::graffiti("graf1.png"), common::graffiti("graf3.png"));
     let fa = m.extract(&a, None).unwrap();
     let fb = m.extract(&b, None).unwrap();
     // graffiti has far more DISK maxima than the budget: exactly TOP_K each, at integer pixels
@@ -77,16 +65,7 @@ fn disk_lightglue_matches_graffiti_along_its_homography() {
         assert!(p[0].fract() == 0.0 && p[1].fract() == 0.0 && p[0] < a.width() as f32);
     }
     let r = m.match_features(&fa, &fb).unwrap();
-    let h = Mat3::from_row_slice(&common::graffiti_homography());
-    let correct =
-        r.x1.iter()
-            .zip(&r.x2)
-            .filter(|(p, q)| {
-                let t = h * Vec3::new(p[0] as f64, p[1] as f64, 1.0);
-                let (dx, dy) = (t[0] / t[2] - q[0] as f64, t[1] / t[2] - q[1] as f64);
-                (dx * dx + dy * dy).sqrt() <= 3.0
-            })
-            .count();
+    let correct = common::graffiti_correct(&r.x1, &r.x2, 3.0);
     // measured: 1024 keypoints → 479 matches, 347 (72 %) within 3 px (XFeat + LighterGlue at
     // 4096: 74 %; graffiti 1→3 is a 40° tilt)
     assert!(
@@ -106,7 +85,7 @@ fn disk_lightglue_matches_graffiti_along_its_homography() {
 #[test]
 fn a_missing_piece_is_named_with_the_export_command() {
     let Some(_) = matcher() else { return };
-    let dir = tempfile_dir();
+    let dir = common::temp_dir("disk");
     std::fs::copy(
         affcorr_devtools::models_dir().join("disk_backbone.onnx"),
         dir.join("disk_backbone.onnx"),
@@ -123,7 +102,7 @@ fn a_missing_piece_is_named_with_the_export_command() {
 #[test]
 fn a_missing_backbone_is_named_with_the_export_command() {
     common::init();
-    let dir = tempfile_dir();
+    let dir = common::temp_dir("disk");
     let e = PointMatcher::load(Matcher::DiskLightGlue, &files(&dir), Some(16), 0, 1).unwrap_err();
     let msg = e.to_string();
     assert!(
@@ -131,14 +110,4 @@ fn a_missing_backbone_is_named_with_the_export_command() {
         "{msg}"
     );
     std::fs::remove_dir_all(&dir).unwrap();
-}
-
-fn tempfile_dir() -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!(
-        "affcorr-disk-test-{}-{:?}",
-        std::process::id(),
-        std::thread::current().id()
-    ));
-    std::fs::create_dir_all(&d).unwrap();
-    d
 }

