@@ -181,7 +181,11 @@ def _export_modules():
             x4 = e.gate(e.conv4(x4))
             x1234 = torch.cat([x1, e.upsample2(x2), e.upsample8(x3), e.upsample32(x4)], dim=1)
             scores = torch.sigmoid(e.score_head(x1234))
-            return scores, F.normalize(x1234, p=2.0, dim=1)
+            # F.normalize's arithmetic without its expand_as: the exported Expand made ONNX
+            # Runtime materialise a full-resolution copy of the norm (a quarter of the graph's
+            # time); the broadcasting Div gives bit-identical features.
+            norm = x1234.norm(p=2.0, dim=1, keepdim=True).clamp_min(1e-12)
+            return scores, x1234 / norm
 
     class Sddh(nn.Module):
         """upstream ``SDDH.forward`` for one image (mask off, conv2D off), traceable with
