@@ -187,6 +187,25 @@ def _export_modules():
             norm = x1234.norm(p=2.0, dim=1, keepdim=True).clamp_min(1e-12)
             return scores, x1234 / norm
 
+    def _bilinear_rows(rows, grid, h, w):
+        """``F.grid_sample(bilinear, align_corners=True, zeros padding)`` of the map whose pixel
+        rows (H·W, C) are ``rows`` at the normalised points ``grid`` (M, 2): four row gathers,
+        each corner outside the map weighted 0."""
+        x = (grid[:, 0] + 1) / 2 * (w - 1).to(grid.dtype)
+        y = (grid[:, 1] + 1) / 2 * (h - 1).to(grid.dtype)
+        x0, y0 = torch.floor(x), torch.floor(y)
+        out = 0
+        for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
+            xi, yi = x0 + dx, y0 + dy
+            wgt = (1 - (x - xi).abs()) * (1 - (y - yi).abs())
+            inside = (xi >= 0) & (xi <= (w - 1)) & (yi >= 0) & (yi <= (h - 1))
+            wgt = torch.where(inside, wgt, torch.zeros_like(wgt))
+            xc = torch.clamp(xi, min=0).long()
+            xc = torch.minimum(xc, w - 1)
+            yc = torch.minimum(torch.clamp(yi, min=0).long(), h - 1)
+            out = out + rows.index_select(0, yc * w + xc) * wgt[:, None]
+        return out
+
     class Sddh(nn.Module):
         """upstream ``SDDH.forward`` for one image (mask off, conv2D off), traceable with
         dynamic H, W and N; the same arithmetic in the same order."""
@@ -213,17 +232,19 @@ def _export_modules():
             cy = torch.minimum(torch.maximum(corner[:, 1], zero), h - 1 - ps)
             a = torch.arange(ps)
             flat = (cy[:, None, None] + a[:, None]) * w + (cx[:, None, None] + a)  # (N, ps, ps)
-            fm = features.reshape(c, -1)
-            patch = fm.index_select(1, flat.reshape(-1)).reshape(c, -1, ps, ps)
-            patch = patch.permute(1, 0, 2, 3)  # (N, C, ps, ps)
+            # Pixel rows (H·W, C): every gather below reads C contiguous values. Gathering
+            # from the channel-major map (and ONNX Runtime's GridSample, which does) strides by
+            # H·W per channel and cost ~6x this transpose.
+            rows = features.reshape(c, -1).transpose(0, 1)
+            patch = rows.index_select(0, flat.reshape(-1)).reshape(-1, ps, ps, c)
+            patch = patch.permute(0, 3, 1, 2)  # (N, C, ps, ps)
             offset = self.offset_conv(patch)
             offset = torch.minimum(torch.maximum(offset, -max_offset), max_offset)
             offset = offset[:, :, 0, 0].reshape(-1, 2, n_pos).permute(0, 2, 1)  # (N, P, 2)
             pos = kwh.unsqueeze(1) + offset
             pos = 2.0 * pos / wh[None] - 1
-            pos = pos.reshape(1, -1, 1, 2)
-            f = F.grid_sample(features, pos, mode="bilinear", align_corners=True)
-            f = f.reshape(c, -1, n_pos, 1).permute(1, 0, 2, 3)  # (N, C, P, 1)
+            f = _bilinear_rows(rows, pos.reshape(-1, 2), h, w)  # (N·P, C)
+            f = f.reshape(-1, n_pos, c).permute(0, 2, 1).unsqueeze(-1)  # (N, C, P, 1)
             f = torch.selu(self.sf_conv(f)).squeeze(-1)  # (N, C, P)
             descs = f.permute(0, 2, 1).reshape(-1, n_pos * c) @ self.agg
             return F.normalize(descs, p=2.0, dim=1)
