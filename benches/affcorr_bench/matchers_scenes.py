@@ -135,16 +135,12 @@ def pose_error(pair, x1, x2) -> tuple[float, int]:
     return max(rotation_error(pose.R, pair.R), translation_error(pose.t, pair.t)), len(x1)
 
 
-def _apply(H: np.ndarray, x: np.ndarray) -> np.ndarray:  # noqa: N803
-    p = np.c_[x, np.ones(len(x))] @ H.T
-    return p[:, :2] / p[:, 2:]
-
-
 def homography_result(pair, x1, x2) -> tuple[bool, int]:
     """(solved: mean corner error < 3 px, correct matches within 3 px of the true H)."""
     import affcorr
+    from affcorr.metrics import corner_error, correct_mask
 
-    correct = int((np.linalg.norm(_apply(pair.H, x1) - x2, axis=1) < CORRECT_PX).sum())
+    correct = int(correct_mask(np.c_[x1, x2], pair.H, CORRECT_PX).sum())
     if len(x1) < 4:
         return False, correct
     try:
@@ -152,9 +148,7 @@ def homography_result(pair, x1, x2) -> tuple[bool, int]:
     except (ValueError, RuntimeError):
         return False, correct
     h, w = pair.img1.shape
-    c = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], float)
-    err = float(np.linalg.norm(_apply(H, c) - _apply(pair.H, c), axis=1).mean())
-    return err < CORRECT_PX, correct
+    return corner_error(H, pair.H, w, h) < CORRECT_PX, correct
 
 
 def scene_sets(args) -> dict[str, list[Case]]:
@@ -187,13 +181,15 @@ def scene_sets(args) -> dict[str, list[Case]]:
 
 
 def evaluate(fn, cases: list[Case]) -> dict:
+    from affcorr.metrics import transfer
+
     from affcorr_bench.eval.pose import pose_auc
 
     errs, solved, nmatch, correct, secs = [], [], [], [], []
     for c in cases:
         x1, x2, s = fn(c.img1, c.img2)
         x1 = np.asarray(x1, float).reshape(-1, 2)
-        x2 = _apply(np.linalg.inv(c.M), np.asarray(x2, float).reshape(-1, 2))
+        x2 = transfer(np.linalg.inv(c.M), np.asarray(x2, float).reshape(-1, 2))
         secs.append(s)
         if hasattr(c.truth, "K1"):
             e, n = pose_error(c.truth, x1, x2)
