@@ -71,6 +71,33 @@ def test_the_detection_rules_on_small_maps():
     assert x.shape == (1, 3, 4, 4) and x[0, 0, :, 3].tolist() == [2, 2, 5, 5]
 
 
+@pytest.mark.skipif(importlib.util.find_spec("torch") is None, reason="needs torch")
+def test_the_sddh_row_sampler_is_grid_sample():
+    # The exported SDDH head samples by four row gathers instead of GridSample: the same
+    # values as F.grid_sample(align_corners=True, zeros padding), also at the map's corners,
+    # on its last row/column and for points outside it (weighted 0, as the padding).
+    import torch
+    import torch.nn.functional as F
+
+    g = torch.Generator().manual_seed(0)
+    c, h, w = 5, 7, 9
+    fmap = torch.rand(1, c, h, w, generator=g)
+    grid = torch.cat(
+        [
+            torch.rand(200, 2, generator=g) * 2.6 - 1.3,
+            torch.tensor(
+                [[-1.0, -1.0], [1.0, 1.0], [1.0, -1.0], [0.999, 1.0], [1.2, 0.0], [1.5, 0.0]]
+            ),
+        ]
+    )
+    want = F.grid_sample(fmap, grid[None, :, None], mode="bilinear", align_corners=True)
+    rows = fmap.reshape(c, -1).T
+    got = A._bilinear_rows(rows, grid, torch.tensor(h), torch.tensor(w))
+    assert got.shape == (len(grid), c)
+    assert torch.allclose(got, want[0, :, :, 0].T, atol=1e-6)
+    assert torch.all(got[-1] == 0) and not torch.all(got[-2] == 0)  # 1.5: wholly outside
+
+
 if not _exported(MODELS):
     if REQUIRED:
         raise RuntimeError(

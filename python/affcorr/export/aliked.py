@@ -132,6 +132,27 @@ def _deform_conv_symbolic(
     )
 
 
+def _bilinear_rows(rows, grid, h, w):
+    """``F.grid_sample(bilinear, align_corners=True, zeros padding)`` of the map whose pixel
+    rows (H·W, C) are ``rows`` at the normalised points ``grid`` (M, 2): four row gathers,
+    each corner outside the map weighted 0. ``h``, ``w``: 0-d int64 tensors (a traced shape)."""
+    import torch
+
+    x = (grid[:, 0] + 1) / 2 * (w - 1).to(grid.dtype)
+    y = (grid[:, 1] + 1) / 2 * (h - 1).to(grid.dtype)
+    x0, y0 = torch.floor(x), torch.floor(y)
+    out = 0
+    for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
+        xi, yi = x0 + dx, y0 + dy
+        wgt = (1 - (x - xi).abs()) * (1 - (y - yi).abs())
+        inside = (xi >= 0) & (xi <= (w - 1)) & (yi >= 0) & (yi <= (h - 1))
+        wgt = torch.where(inside, wgt, torch.zeros_like(wgt))
+        xc = torch.minimum(torch.clamp(xi, min=0).long(), w - 1)
+        yc = torch.minimum(torch.clamp(yi, min=0).long(), h - 1)
+        out = out + rows.index_select(0, yc * w + xc) * wgt[:, None]
+    return out
+
+
 def _export_modules():
     import torch
     import torch.nn.functional as F
@@ -182,29 +203,10 @@ def _export_modules():
             x1234 = torch.cat([x1, e.upsample2(x2), e.upsample8(x3), e.upsample32(x4)], dim=1)
             scores = torch.sigmoid(e.score_head(x1234))
             # F.normalize's arithmetic without its expand_as: the exported Expand made ONNX
-            # Runtime materialise a full-resolution copy of the norm (a quarter of the graph's
-            # time); the broadcasting Div gives bit-identical features.
+            # Runtime materialise a full-resolution copy of the norm (docs/matchers.md, ALIKED
+            # speed); the broadcasting Div gives bit-identical features.
             norm = x1234.norm(p=2.0, dim=1, keepdim=True).clamp_min(1e-12)
             return scores, x1234 / norm
-
-    def _bilinear_rows(rows, grid, h, w):
-        """``F.grid_sample(bilinear, align_corners=True, zeros padding)`` of the map whose pixel
-        rows (H·W, C) are ``rows`` at the normalised points ``grid`` (M, 2): four row gathers,
-        each corner outside the map weighted 0."""
-        x = (grid[:, 0] + 1) / 2 * (w - 1).to(grid.dtype)
-        y = (grid[:, 1] + 1) / 2 * (h - 1).to(grid.dtype)
-        x0, y0 = torch.floor(x), torch.floor(y)
-        out = 0
-        for dx, dy in ((0, 0), (1, 0), (0, 1), (1, 1)):
-            xi, yi = x0 + dx, y0 + dy
-            wgt = (1 - (x - xi).abs()) * (1 - (y - yi).abs())
-            inside = (xi >= 0) & (xi <= (w - 1)) & (yi >= 0) & (yi <= (h - 1))
-            wgt = torch.where(inside, wgt, torch.zeros_like(wgt))
-            xc = torch.clamp(xi, min=0).long()
-            xc = torch.minimum(xc, w - 1)
-            yc = torch.minimum(torch.clamp(yi, min=0).long(), h - 1)
-            out = out + rows.index_select(0, yc * w + xc) * wgt[:, None]
-        return out
 
     class Sddh(nn.Module):
         """upstream ``SDDH.forward`` for one image (mask off, conv2D off), traceable with
@@ -233,8 +235,8 @@ def _export_modules():
             a = torch.arange(ps)
             flat = (cy[:, None, None] + a[:, None]) * w + (cx[:, None, None] + a)  # (N, ps, ps)
             # Pixel rows (H·W, C): every gather below reads C contiguous values. Gathering
-            # from the channel-major map (and ONNX Runtime's GridSample, which does) strides by
-            # H·W per channel and cost ~6x this transpose.
+            # from the channel-major map (as ONNX Runtime's GridSample does) strides by H·W per
+            # channel, far slower than this one transpose (docs/matchers.md, ALIKED speed).
             rows = features.reshape(c, -1).transpose(0, 1)
             patch = rows.index_select(0, flat.reshape(-1)).reshape(-1, ps, ps, c)
             patch = patch.permute(0, 3, 1, 2)  # (N, C, ps, ps)
