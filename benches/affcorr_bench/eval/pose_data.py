@@ -25,7 +25,7 @@ import json
 import math
 import subprocess
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import lru_cache
 from pathlib import Path
 
@@ -192,6 +192,11 @@ class _Plane:
     m: float  # world units per texture pixel
     tex: int
     crop: tuple[float, float, float, float]  # x0, y0, width, height in texture pixels
+    # Texture-poor surfaces (rooms): at least this pyramid level (a blur of up to ~4 texture
+    # pixels, affcorr.train.views._LEVELS), and values grey + contrast * (value - 0.5).
+    min_level: int = 0
+    contrast: float = 1.0
+    grey: float = 0.5
 
 
 def _rot(axis: str, a: float) -> np.ndarray:
@@ -210,20 +215,25 @@ def _crop(rng, tex, aspect: float, frac: float):
     return (rng.uniform(0, max(tex.w - w, 0.0)), rng.uniform(0, max(tex.h - h, 0.0)), w, h)
 
 
-def _scene(rng, f1: float) -> list[_Plane]:
+def _plane(rng, centre, u, v, width: float, height: float, frac: float, **look) -> _Plane:
+    """A width x height rectangle centred at ``centre`` along u (texture +x) and v (texture +y),
+    textured with a crop of ``frac`` of a random texture; ``look``: _Plane's min_level,
+    contrast, grey."""
     texs = _textures()
+    k = int(rng.integers(len(texs)))
+    crop = _crop(rng, texs[k][1], width / height, frac)
+    u, v = np.asarray(u, float), np.asarray(v, float)
+    origin = np.asarray(centre, float) - u * width / 2 - v * height / 2
+    return _Plane(origin, u, v, width / crop[2], k, crop, **look)
+
+
+def _scene(rng, f1: float) -> list[_Plane]:
     D = rng.uniform(5.0, 8.0)
     half_w = D * (SIZE[0] / 2) / f1  # half the view's width at depth D
     planes = []
 
     def add(centre, Rp, width, height, frac):
-        k = int(rng.integers(len(texs)))
-        tex = texs[k][1]
-        crop = _crop(rng, tex, width / height, frac)
-        m = width / crop[2]
-        u, v = Rp[:, 0], Rp[:, 1]
-        origin = centre - u * width / 2 - v * height / 2
-        planes.append(_Plane(origin, u, v, m, k, crop))
+        planes.append(_plane(rng, centre, Rp[:, 0], Rp[:, 1], width, height, frac))
 
     # back wall, facing camera 1 (normal -z), tilted a little
     depth = D + rng.uniform(1.0, 3.0)
@@ -293,7 +303,7 @@ def _render(planes: list[_Plane], K: np.ndarray, Rc: np.ndarray, C: np.ndarray):
         shrink = np.maximum(shrink, np.hypot(np.gradient(a, axis=0), np.gradient(b, axis=0)))
         tex = texs[p.tex][1]
         tx, ty = a[hit] + x0, b[hit] + y0
-        level = np.clip(np.searchsorted(_LEVELS, shrink[hit]), 0, len(_LEVELS) - 1)
+        level = np.clip(np.searchsorted(_LEVELS, shrink[hit]), p.min_level, len(_LEVELS) - 1)
         vals = np.empty(len(tx), np.float32)
         for lv in np.unique(level):
             k = level == lv
@@ -308,6 +318,8 @@ def _render(planes: list[_Plane], K: np.ndarray, Rc: np.ndarray, C: np.ndarray):
                 align_corners=True,
             )
             vals[k] = s.reshape(-1).numpy()
+        if p.contrast != 1.0:
+            vals = np.float32(p.grey) + np.float32(p.contrast) * (vals - np.float32(0.5))
         img[hit] = vals
         depth[hit] = lam[hit]
     return img, depth
@@ -339,6 +351,28 @@ def _u8(img: np.ndarray) -> np.ndarray:
     return np.clip(np.rint(img * 255.0), 0, 255).astype(np.uint8)
 
 
+def _views(rng, planes, K1, K2, R2, C2, with_depth: bool) -> dict | None:
+    """Both views of ``planes`` (camera 1 = world, camera 2 X_cam = R2 (X - C2)) with the pair's
+    photometric change and noise, as render_pair returns them; None when less than
+    MIN_COVISIBLE of view 1 is seen in view 2."""
+    img1, depth1 = _render(planes, K1, np.eye(3), np.zeros(3))
+    img2, depth2 = _render(planes, K2, R2, C2)
+    cov = _covisible(planes, K1, K2, R2, C2, depth1, depth2)
+    if cov < MIN_COVISIBLE:
+        return None
+    gain, gamma = np.exp(rng.uniform(-0.3, 0.3)), np.exp(rng.uniform(-0.3, 0.3))
+    img2 = np.clip(np.clip(img2, 0, 1) ** gamma * gain, 0, 1)
+    img1 = img1 + rng.normal(0, 1.5 / 255, img1.shape)
+    img2 = img2 + rng.normal(0, 1.5 / 255, img2.shape)
+    t = -R2 @ C2  # X2 = R2 (X1 - C2) with camera 1 = world
+    out = dict(img1=_u8(img1), img2=_u8(img2), K1=K1, K2=K2, R=R2, t=_unit(t))
+    out["covisible"] = np.float64(cov)
+    out["baseline"] = np.float64(np.linalg.norm(t))  # scene units
+    if with_depth:
+        out.update(depth1=depth1, depth2=depth2)
+    return out
+
+
 def render_pair(index: int, seed: int = 0, *, with_depth: bool = False) -> dict:
     """Synthetic pair ``index``: img1, img2 (uint8), K1, K2, R, t (unit), covisible (and the
     views' depth maps depth1, depth2 with ``with_depth``: inf where no plane is hit)."""
@@ -359,22 +393,9 @@ def render_pair(index: int, seed: int = 0, *, with_depth: bool = False) -> dict:
         x = np.cross([0.0, 1.0, 0.0], z)
         x /= np.linalg.norm(x)
         R2 = _rot("z", rng.uniform(-0.2, 0.2)) @ np.stack([x, np.cross(z, x), z])
-        img1, depth1 = _render(planes, K1, np.eye(3), np.zeros(3))
-        img2, depth2 = _render(planes, K2, R2, C2)
-        cov = _covisible(planes, K1, K2, R2, C2, depth1, depth2)
-        if cov < MIN_COVISIBLE:
-            continue
-        gain, gamma = np.exp(rng.uniform(-0.3, 0.3)), np.exp(rng.uniform(-0.3, 0.3))
-        img2 = np.clip(np.clip(img2, 0, 1) ** gamma * gain, 0, 1)
-        img1 = img1 + rng.normal(0, 1.5 / 255, img1.shape)
-        img2 = img2 + rng.normal(0, 1.5 / 255, img2.shape)
-        t = -R2 @ C2  # X2 = R2 (X1 - C2) with camera 1 = world
-        out = dict(img1=_u8(img1), img2=_u8(img2), K1=K1, K2=K2, R=R2, t=_unit(t))
-        out["covisible"] = np.float64(cov)
-        out["baseline"] = np.float64(np.linalg.norm(t))  # scene units
-        if with_depth:
-            out.update(depth1=depth1, depth2=depth2)
-        return out
+        out = _views(rng, planes, K1, K2, R2, C2, with_depth)
+        if out is not None:
+            return out
     raise RuntimeError(f"synthetic pair {index}: no usable draw in 50 attempts")
 
 
@@ -394,6 +415,152 @@ def synthetic_pairs(count: int, seed: int = 0) -> list[PosePair]:
             return zz["img1"], zz["img2"]
 
         out.append(PosePair("synthetic", f"{i:04d}", z["K1"], z["K2"], z["R"], z["t"], load))
+    return out
+
+
+# --- rendered low-texture rooms ---------------------------------------------------------------
+
+ROOM_VERSION = "rooms-v1"
+ROOM_ROLL = (0.0, 10.0)  # |roll| of camera 2 about its optical axis (deg), upright set
+ROOM_ROLL_ROTATED = (60.0, 180.0)  # rotated set
+_ROOM_TAG, _ROLL_TAG = 0x524F4F4D, 0x524F4C4C  # random streams of their own ("ROOM", "ROLL")
+
+
+def _look_at(forward) -> np.ndarray:
+    """World-to-camera rotation of an upright camera (y down) looking along ``forward``."""
+    z = np.asarray(forward, float) / np.linalg.norm(forward)
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z])
+
+
+def _room(rng) -> tuple[list[_Plane], np.ndarray, tuple[np.ndarray, np.ndarray]]:
+    """A texture-poor room around camera 1, in room coordinates (x right, y down, z forward,
+    metres; camera 1 at the origin). Returns its planes, camera 1's world-to-camera rotation
+    and the room's box (min corner, max corner).
+
+    Floor, ceiling and 4 walls (closed: an open side would show a black void, an edge no room
+    has) carry blurred crops of the textures at 10-30 % contrast around
+    a grey (both varying per room and per surface); 2-5 fully textured rectangles stand on or
+    near the walls: posters, furniture fronts (0.25-0.6 m off the wall), doors."""
+    from affcorr.train.views import _LEVELS
+
+    left, right = rng.uniform(1.2, 3.5, 2)  # walls' distances from camera 1
+    front, back = rng.uniform(2.5, 6.0), rng.uniform(0.6, 3.0)
+    height, eye = rng.uniform(2.4, 3.2), rng.uniform(1.2, 1.7)
+    floor, ceil = eye, eye - height  # y of the floor and the ceiling
+    contrast, wall_grey = rng.uniform(0.1, 0.3), rng.uniform(0.45, 0.7)
+    e = 0.05  # surfaces overlap at the edges (no cracks; the overlap is behind a neighbour)
+
+    def poor(centre, u, v, w, h, grey):
+        look = dict(
+            min_level=int(rng.integers(4, len(_LEVELS))),
+            contrast=float(np.clip(contrast * rng.uniform(0.7, 1.3), 0.1, 0.3)),
+            grey=float(np.clip(grey + rng.uniform(-0.08, 0.08), 0.2, 0.85)),
+        )
+        return _plane(rng, centre, u, v, w + 2 * e, h + 2 * e, rng.uniform(0.4, 1.0), **look)
+
+    X, Y, Z = np.eye(3)
+    mid_x, mid_y, mid_z = (right - left) / 2, (floor + ceil) / 2, (front - back) / 2
+    wx, wz = left + right, front + back
+    planes = [
+        poor([mid_x, mid_y, front], X, Y, wx, height, wall_grey),
+        poor([-left, mid_y, mid_z], -Z, Y, wz, height, wall_grey),
+        poor([right, mid_y, mid_z], Z, Y, wz, height, wall_grey),
+        poor([mid_x, floor, mid_z], X, Z, wx, wz, rng.uniform(0.25, 0.5)),
+        poor([mid_x, ceil, mid_z], X, -Z, wx, wz, rng.uniform(0.65, 0.85)),
+        poor([mid_x, mid_y, -back], -X, Y, wx, height, wall_grey),
+    ]
+    # objects on the front and side walls: (a point of the wall, along, inward normal, range)
+    walls = [
+        (front * Z, X, -Z, (-left, right)),
+        (-left * X, Z, X, (0.5, front)),
+        (right * X, Z, -X, (0.5, front)),
+    ]
+    for _ in range(int(rng.integers(2, 6))):
+        base, along, inward, (lo, hi) = walls[int(rng.integers(len(walls)))]
+        kind = rng.choice(["poster", "poster", "furniture", "door"])
+        if kind == "poster":
+            w = rng.uniform(0.4, 1.2)
+            h = min(w * rng.uniform(0.6, 1.5), height - 0.6)
+            y, off = max(floor - rng.uniform(1.1, 1.8), ceil + h / 2 + 0.1), 0.02
+        elif kind == "furniture":
+            w, h = rng.uniform(0.6, 1.6), rng.uniform(0.5, 1.1)
+            y, off = floor - h / 2 - 0.01, rng.uniform(0.25, 0.6)
+        else:
+            w, h = rng.uniform(0.8, 0.95), min(rng.uniform(1.95, 2.1), height - 0.1)
+            y, off = floor - h / 2 - 0.01, 0.02
+        a = rng.uniform(lo + w / 2 + 0.05, max(hi - w / 2 - 0.05, lo + w / 2 + 0.1))
+        centre = base + a * along + off * inward
+        centre[1] = y
+        planes.append(_plane(rng, centre, along, Y, w, h, rng.uniform(0.3, 0.9)))
+    # camera 1 looks at a wall (front, left or right) or at one of the front corners
+    view = rng.choice(["front", "left", "right", "corner", "corner"])
+    yaw = {"front": 0.0, "left": -math.pi / 2, "right": math.pi / 2}.get(view)
+    if yaw is None:
+        yaw = math.atan2(right, front) if rng.uniform() < 0.5 else math.atan2(-left, front)
+    yaw += rng.uniform(-0.3, 0.3)
+    pitch = rng.uniform(-0.25, 0.25)  # > 0: down
+    R1 = _look_at(
+        [math.cos(pitch) * math.sin(yaw), math.sin(pitch), math.cos(pitch) * math.cos(yaw)]
+    )
+    box = (np.array([-left, ceil, -back]), np.array([right, floor, front]))
+    return planes, R1, box
+
+
+def room_pair(
+    index: int, seed: int = 0, roll: tuple[float, float] = ROOM_ROLL, *, with_depth: bool = False
+) -> dict:
+    """Room pair ``index``: the keys of render_pair (metres) and ``roll``, camera 2's rotation
+    about its optical axis in degrees, |roll| in ``roll`` with a random sign.
+
+    Camera 1 stands in a texture-poor room (_room) looking at a wall or a corner; camera 2 is
+    0.3-1.5 m away (inside the room), turned by up to 30 deg of yaw and 20 deg of pitch, then
+    rolled. The room and the motion do not depend on ``roll`` (a stream of their own), so the
+    upright and the rolled sets show the same rooms where the same draw is covisible in both."""
+    for attempt in range(50):
+        rng = np.random.default_rng([seed, index, attempt, _ROOM_TAG])
+        roll_rng = np.random.default_rng([seed, index, attempt, _ROLL_TAG])
+        f1 = rng.uniform(420.0, 620.0)
+        K1 = _intrinsics(rng, f1)
+        K2 = _intrinsics(rng, f1 * 2.0 ** rng.uniform(-0.35, 0.35))
+        planes, R1, (lo, hi) = _room(rng)
+        direction = rng.normal(size=3) * [1.0, 0.5, 1.0]
+        C2 = direction / np.linalg.norm(direction) * rng.uniform(0.3, 1.5)  # camera 1's frame
+        yaw, pitch = np.radians(rng.uniform(-30.0, 30.0)), np.radians(rng.uniform(-20.0, 20.0))
+        r = roll_rng.uniform(*roll) * roll_rng.choice([-1.0, 1.0])
+        C2_room = R1.T @ C2
+        if np.any(C2_room < lo + 0.25) or np.any(C2_room > hi - 0.25):
+            continue  # camera 2 outside the room, or too close to a surface
+        R2 = _rot("z", math.radians(r)) @ _rot("x", pitch) @ _rot("y", yaw)
+        # the room in camera 1's frame (camera 1 = world, as _views wants it)
+        moved = [replace(p, origin=R1 @ p.origin, u=R1 @ p.u, v=R1 @ p.v) for p in planes]
+        out = _views(rng, moved, K1, K2, R2, C2, with_depth)
+        if out is not None:
+            out["roll"] = np.float64(r)
+            return out
+    raise RuntimeError(f"room pair {index}: no usable draw in 50 attempts")
+
+
+def room_pairs(count: int, seed: int = 0, roll: tuple[float, float] = ROOM_ROLL) -> list[PosePair]:
+    """The first ``count`` room pairs with |roll| in ``roll`` (degrees): ROOM_ROLL upright,
+    ROOM_ROLL_ROTATED rolled (rendered once, then read from the cache)."""
+    lo, hi = roll
+    d = pose_cache() / f"{ROOM_VERSION}-seed{seed}-roll{lo:g}-{hi:g}"
+    d.mkdir(parents=True, exist_ok=True)
+    dataset = "rooms" if hi <= 45 else "rooms-rolled"
+    out = []
+    for i in range(count):
+        path = d / f"{i:04d}.npz"
+        if not path.exists():
+            np.savez_compressed(path, **room_pair(i, seed, roll))
+        z = np.load(path)
+
+        def load(path=path):
+            zz = np.load(path)
+            return zz["img1"], zz["img2"]
+
+        out.append(PosePair(dataset, f"{i:04d}", z["K1"], z["K2"], z["R"], z["t"], load))
     return out
 
 
