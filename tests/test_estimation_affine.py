@@ -124,3 +124,46 @@ def test_confidence_needs_acs_and_refinement_a_known_choice():
     with pytest.raises(ValueError, match="affine_refinement must be one of"):
         affcorr.estimate_fundamental(s["corrs"], affine_refinement="lo")
     assert {"affine_refinement", "affine_confidence"} <= set(affcorr.ESTIMATOR_OPTIONS)
+
+
+def test_the_planar_twin_fits_every_ac_exactly():
+    """Two calibrated views of one plane have a second pose (the other physically valid
+    decomposition of the plane's homography) under which every AC of the plane is exact: the
+    same points and the same A = dx2/dx1. No estimator, points or ACs, can choose between the
+    two (scene_families.planar_twin; the chessboard board views of the real-pair table)."""
+    cv2 = pytest.importorskip("cv2")
+    from types import SimpleNamespace
+
+    from affcorr_bench.common import skew
+
+    rng = np.random.default_rng(3)
+    K = np.array([[520.0, 0.0, 330.0], [0.0, 500.0, 235.0], [0.0, 0.0, 1.0]])
+    Ki = np.linalg.inv(K)
+    found = 0
+    for _ in range(200):
+        R = cv2.Rodrigues(rng.normal(0.0, 0.3, 3))[0]
+        t = rng.normal(0.0, 1.0, 3)
+        n = np.array([0.0, 0.0, 1.0]) + rng.normal(0.0, 0.3, 3)
+        n /= np.linalg.norm(n)  # the plane n^T X = 5 in camera 1
+        x1 = rng.uniform([0.0, 0.0], [640.0, 480.0], (150, 2))
+        X = np.c_[x1, np.ones(len(x1))] @ Ki.T
+        X *= (5.0 / (X @ n))[:, None]
+        if (X[:, 2] <= 0).any() or ((X @ R.T + t)[:, 2] <= 0).any():
+            continue
+        H = K @ (R + np.outer(t, n) / 5.0) @ Ki
+        corrs = affcorr.correspondences_from_homography(H / H[2, 2], x1)
+        pair = SimpleNamespace(K1=K, K2=K, R=R, t=t / np.linalg.norm(t))
+        twin = sf.planar_twin(corrs, pair)
+        if twin is None:  # the other decomposition puts the plane behind a camera
+            continue
+        found += 1
+        R2, t2 = twin
+        assert max(sf.pose_errors(R2, t2, dict(R=R, t=pair.t))) > 5.0
+        for Ra, ta in ((R, pair.t), (R2, t2)):
+            F = Ki.T @ skew(ta) @ Ra @ Ki
+            F /= np.linalg.norm(F)
+            assert np.max(np.abs(affcorr.sampson_point(F, corrs))) < 1e-9
+            assert np.max(np.abs(affcorr.sampson_affine(F, corrs))) < 1e-9
+        if found == 3:
+            break
+    assert found == 3
