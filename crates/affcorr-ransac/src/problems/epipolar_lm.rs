@@ -14,6 +14,7 @@
 //! at the inlier threshold, so an AC whose A is far off pulls little.
 
 use super::Correspondences;
+use super::normal_eq::EntrySums;
 use super::simd::{BLOCK, dispatch, dot};
 use crate::loss::Loss;
 use crate::refine::{Mat9, Vec9};
@@ -171,8 +172,7 @@ pub(crate) fn affine_normal_equations(
     jtj: &mut Mat9,
     jtr: &mut Vec9,
 ) -> f64 {
-    let mut g_sum = [0.0; 9];
-    let mut gg = [0.0; 45];
+    let mut sums = EntrySums::new();
     let mut cost = 0.0;
     for &i in indices {
         let c = terms.confidence(i);
@@ -182,18 +182,10 @@ pub(crate) fn affine_normal_equations(
         for (s, g) in sampson_affine_signed_grad_f(f, &data.ac(i)) {
             let (rho, w) = terms.loss.cost_and_weight(terms.lambda * s * s);
             cost += c * rho;
-            let w = c * w * terms.lambda;
-            let mut k = 0;
-            for a in 0..9 {
-                g_sum[a] += w * s * g[a];
-                for b in a..9 {
-                    gg[k] += w * g[a] * g[b];
-                    k += 1;
-                }
-            }
+            sums.add(&g, c * w * terms.lambda, s);
         }
     }
-    project(&g_sum, &gg, basis, jtj, jtr);
+    sums.project(&flat(basis)[..basis.len()], jtj, jtr);
     cost
 }
 
@@ -279,44 +271,23 @@ pub(crate) fn normal_equations(
     jtj: &mut Mat9,
     jtr: &mut Vec9,
 ) -> f64 {
-    let mut g_sum = [0.0; 9];
-    let mut gg = [0.0; 45];
+    let mut sums = EntrySums::new();
     let cost = dispatch(
         #[inline(always)]
-        || accumulate(data, f, indices, loss, &mut g_sum, &mut gg),
+        || accumulate(data, f, indices, loss, &mut sums.g_sum, &mut sums.gg),
     );
-    project(&g_sum, &gg, basis, jtj, jtr);
+    sums.project(&flat(basis)[..basis.len()], jtj, jtr);
     cost
 }
 
-/// Adds Bᵀ G B to `jtj` and Bᵀ g to `jtr` for G the symmetric matrix whose upper triangle is
-/// `gg` (row-major) and B the tangent `basis`.
-fn project(g_sum: &[f64; 9], gg: &[f64; 45], basis: &[Mat3], jtj: &mut Mat9, jtr: &mut Vec9) {
-    let dof = basis.len();
-    let mut full = Mat9::zeros();
-    let mut k = 0;
-    for a in 0..9 {
-        for b in a..9 {
-            full[(a, b)] = gg[k];
-            full[(b, a)] = gg[k];
-            k += 1;
-        }
-    }
-    let g_sum = Vec9::from_column_slice(g_sum);
-    let flat: [Vec9; 9] = std::array::from_fn(|k| {
-        if k < dof {
-            Vec9::from_column_slice(&affcorr_geom::types::mat3_to_row(&basis[k]))
-        } else {
-            Vec9::zeros()
-        }
-    });
-    for a in 0..dof {
-        let ga = full * flat[a];
-        jtr[a] += flat[a].dot(&g_sum);
-        for b in 0..dof {
-            jtj[(a, b)] += flat[b].dot(&ga);
-        }
-    }
+/// The tangent `basis` (at most 9 directions) as rows of the 9 entries (row-major), padded
+/// with zeros, for [`EntrySums::project`] on its first `basis.len()`.
+fn flat(basis: &[Mat3]) -> [Vec9; 9] {
+    std::array::from_fn(|k| {
+        basis.get(k).map_or_else(Vec9::zeros, |b| {
+            Vec9::from_column_slice(&affcorr_geom::types::mat3_to_row(b))
+        })
+    })
 }
 
 /// Σ ρ(r²) over `indices`, and adds Σ w r g to `g_sum` and the upper triangle of Σ w g gᵀ to

@@ -17,6 +17,7 @@
 
 use super::Correspondences;
 use super::homography::HomographyProblem;
+use super::normal_eq::EntrySums;
 use crate::loss::Loss;
 use crate::refine::{LeastSquares, Mat9, Vec9};
 use affcorr_geom::{Mat2, Mat3, Vec2};
@@ -32,6 +33,19 @@ const MAX_AFFINE_SCALE: f64 = 1e4;
 
 /// Most rounds of estimate-λ-then-refine: λ is first estimated at the points-only model.
 pub(crate) const AFFINE_ROUNDS: usize = 3;
+
+/// A_H(x1) − A, the four entries row-major: the residuals of [`affine_residuals_and_gradients`]
+/// without their gradients (the costs of LM's trial steps and the scale estimate need none).
+#[inline]
+pub(crate) fn affine_residuals(h: &Mat3, x1: &Vec2, a: &Mat2) -> [f64; 4] {
+    let w = h[(2, 0)] * x1.x + h[(2, 1)] * x1.y + h[(2, 2)];
+    let q = |r: usize| (h[(r, 0)] * x1.x + h[(r, 1)] * x1.y + h[(r, 2)]) / w;
+    let q = [q(0), q(1)];
+    std::array::from_fn(|e| {
+        let (r, c) = (e / 2, e % 2);
+        (h[(r, c)] - q[r] * h[(2, c)]) / w - a[(r, c)]
+    })
+}
 
 /// A_H(x1) − A and its gradient over the 9 entries of H (row-major), for each of the four
 /// entries of A (row-major).
@@ -89,9 +103,7 @@ pub(crate) fn affine_terms<'c>(
         let u = (h[(0, 0)] * x1.x + h[(0, 1)] * x1.y + h[(0, 2)]) / wz;
         let v = (h[(1, 0)] * x1.x + h[(1, 1)] * x1.y + h[(1, 2)]) / wz;
         pts.extend([(u - x2.x).powi(2), (v - x2.y).powi(2)]);
-        for (d, _) in affine_residuals_and_gradients(h, &x1, &data.a[i]) {
-            aff.push(d * d);
-        }
+        aff.extend(affine_residuals(h, &x1, &data.a[i]).map(|d| d * d));
     }
     if pts.len() < 10 {
         return None;
@@ -145,7 +157,7 @@ impl LeastSquares for HomographyAffineFit<'_, '_> {
             if c <= 0.0 {
                 continue;
             }
-            for (d, _) in affine_residuals_and_gradients(h, &self.data.x1[i], &self.data.a[i]) {
+            for d in affine_residuals(h, &self.data.x1[i], &self.data.a[i]) {
                 cost += c * self.terms.loss.cost(self.terms.lambda * d * d);
             }
         }
@@ -161,7 +173,7 @@ impl LeastSquares for HomographyAffineFit<'_, '_> {
         jtr: &mut Vec9,
     ) -> f64 {
         let mut cost = self.problem.normal_equations(h, indices, loss, jtj, jtr);
-        let (mut a, mut g) = (Mat9::zeros(), Vec9::zeros());
+        let mut sums = EntrySums::new();
         for &i in indices {
             let c = self.confidence(i);
             if c <= 0.0 {
@@ -170,20 +182,10 @@ impl LeastSquares for HomographyAffineFit<'_, '_> {
             for (d, grad) in affine_residuals_and_gradients(h, &self.data.x1[i], &self.data.a[i]) {
                 let (rho, w) = self.terms.loss.cost_and_weight(self.terms.lambda * d * d);
                 cost += c * rho;
-                let w = c * w * self.terms.lambda;
-                let grad = Vec9::from_column_slice(&grad);
-                a += grad * grad.transpose() * w;
-                g += grad * (w * d);
+                sums.add(&grad, c * w * self.terms.lambda, d);
             }
         }
-        let basis = super::homography::tangent_basis(h);
-        for r in 0..8 {
-            let ab = a * basis[r];
-            jtr[r] += basis[r].dot(&g);
-            for c in 0..8 {
-                jtj[(r, c)] += basis[c].dot(&ab);
-            }
-        }
+        sums.project(&super::homography::tangent_basis(h), jtj, jtr);
         cost
     }
 
@@ -306,6 +308,12 @@ mod tests {
         }
         let a = ac.a + Mat2::new(0.01, -0.02, 0.03, 0.0);
         let base = affine_residuals_and_gradients(&h, &x1, &a);
+        // The residuals alone are the same numbers: minus the offset of A from A_H.
+        let offset = [0.01, -0.02, 0.03, 0.0];
+        for ((d, (e, _)), o) in affine_residuals(&h, &x1, &a).iter().zip(base).zip(offset) {
+            assert!((d - e).abs() <= 1e-15, "{d} vs {e}");
+            assert!((d + o).abs() <= 1e-12, "{d} vs -{o}");
+        }
         for k in 0..9 {
             let step = 1e-6 * h[(k / 3, k % 3)].abs().max(1e-4);
             let (mut hp, mut hm) = (h, h);

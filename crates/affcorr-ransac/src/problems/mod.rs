@@ -7,6 +7,7 @@ mod epipolar_lm;
 pub mod fundamental;
 pub mod homography;
 mod homography_affine;
+mod normal_eq;
 pub mod relpose;
 mod simd;
 
