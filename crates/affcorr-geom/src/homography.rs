@@ -5,8 +5,9 @@
 
 use crate::batch;
 use crate::camera::check_len;
+use crate::epipolar::Pose;
 use crate::error::{GeomError, Result};
-use crate::types::{AcRow, AffineCorrespondence, Mat2, Mat3, Vec2};
+use crate::types::{AcRow, AffineCorrespondence, Mat2, Mat3, Vec2, Vec3};
 
 /// `|w|` below this (relative to ‖H‖) means the point maps to infinity.
 const VANISHING_W: f64 = 1e-12;
@@ -89,6 +90,86 @@ fn check_homography(h: &Mat3) -> Result<()> {
         });
     }
     Ok(())
+}
+
+/// One decomposition of a calibrated homography: H ∝ R + (t/d) nᵀ for the camera motion
+/// X2 = R X1 + t and the plane nᵀ X1 = d (n a unit normal, d > 0 the plane's distance from
+/// camera 1). H fixes t only up to that distance.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlanarMotion {
+    /// R and t/d (the translation in units of the plane's distance).
+    pub pose: Pose,
+    /// The plane's unit normal n in camera 1, pointing away from it (nᵀ X1 = d > 0).
+    pub normal: Vec3,
+}
+
+/// The decompositions of the calibrated homography `h` (x̃2 ∝ H x̃1 in normalised coordinates)
+/// that put the plane in front of camera 1 at a share `in_front` of the points `x1` (normalised
+/// coordinates of the matches `x1` ↔ `x2`), at most two: the true motion and its twin, which
+/// induce the same H and so explain every match equally (Faugeras and Lustman, 1988).
+///
+/// The method of Ma, Soatto, Košecká and Sastry (An Invitation to 3-D Vision, 2004, §5.3.3):
+/// with H scaled so that its middle singular value is 1 and x̃2ᵀ H x̃1 > 0 for most matches
+/// (the sign of positive depths), HᵀH = V diag(σ₁², 1, σ₃²) Vᵀ,
+/// u₁,₂ = (√(1 − σ₃²) v₁ ± √(σ₁² − 1) v₃) / √(σ₁² − σ₃²), and for each u:
+/// U = \[v₂, u, v₂ × u\], W = \[H v₂, H u, H v₂ × H u\], R = W Uᵀ, n = v₂ × u, t = (H − R) n;
+/// (R, −t, −n) are the other two. With H = R + t nᵀ and X1 = x̃1 / (nᵀ x̃1), the depths in both
+/// cameras are positive exactly when nᵀ x̃1 > 0, which keeps two of the four.
+///
+/// Empty when H is a rotation (σ₁ ≈ σ₃: no translation, or a plane at infinity) or singular.
+pub fn decompose_homography(
+    h: &Mat3,
+    x1: &[Vec2],
+    x2: &[Vec2],
+    in_front: f64,
+) -> Result<Vec<PlanarMotion>> {
+    check_len("x2", x1.len(), x2.len())?;
+    let mut sv = h.singular_values();
+    sv.as_mut_slice().sort_by(|a, b| b.total_cmp(a));
+    if !(sv[1] > 0.0 && sv.iter().all(|v| v.is_finite())) {
+        return Ok(Vec::new());
+    }
+    let mut hn = h / sv[1];
+    let p = |x: &Vec2| Vec3::new(x.x, x.y, 1.0);
+    let positive = x1
+        .iter()
+        .zip(x2)
+        .filter(|(a, b)| p(b).dot(&(hn * p(a))) > 0.0)
+        .count();
+    if 2 * positive < x1.len() {
+        hn = -hn;
+    }
+    let eig = (hn.transpose() * hn).symmetric_eigen();
+    let mut order = [0, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let (s1, s3) = (eig.eigenvalues[order[0]], eig.eigenvalues[order[2]]);
+    let v = |k: usize| eig.eigenvectors.column(order[k]).into_owned();
+    let (v1, v2, v3) = (v(0), v(1), v(2));
+    if s1 - s3 < 1e-9 * s1.abs().max(1.0) {
+        return Ok(Vec::new());
+    }
+    let (a, b) = ((1.0 - s3).max(0.0).sqrt(), (s1 - 1.0).max(0.0).sqrt());
+    let norm = (s1 - s3).sqrt();
+    let mut out = Vec::new();
+    for u in [(v1 * a + v3 * b) / norm, (v1 * a - v3 * b) / norm] {
+        let big_u = Mat3::from_columns(&[v2, u, v2.cross(&u)]);
+        let (hv2, hu) = (hn * v2, hn * u);
+        let big_w = Mat3::from_columns(&[hv2, hu, hv2.cross(&hu)]);
+        let r = big_w * big_u.transpose();
+        let n = v2.cross(&u);
+        let t = (hn - r) * n;
+        for sign in [1.0, -1.0] {
+            let (n, t) = (n * sign, t * sign);
+            let front = x1.iter().filter(|x| n.dot(&p(x)) > 0.0).count();
+            if front as f64 >= in_front * x1.len() as f64 && !x1.is_empty() {
+                out.push(PlanarMotion {
+                    pose: Pose { r, t },
+                    normal: n,
+                });
+            }
+        }
+    }
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -174,5 +255,116 @@ mod tests {
         );
         let e = affine_from_homography(&Mat3::zeros(), &[[0.0, 0.0]], &mut out[..1]);
         assert!(matches!(e, Err(GeomError::Degenerate { what: "H", .. })));
+    }
+
+    /// A random plane in front of camera 1, a motion that keeps it in front of camera 2, and
+    /// matches on it (normalised coordinates).
+    fn planar_scene(seed: u64) -> (PlanarMotion, Vec<Vec2>, Vec<Vec2>) {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        loop {
+            let w = Vec3::new(
+                rng.random_range(-0.4..0.4),
+                rng.random_range(-0.4..0.4),
+                rng.random_range(-0.4..0.4),
+            );
+            let r = nalgebra::Rotation3::new(w).into_inner();
+            let t = Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-0.5..0.5),
+            );
+            let n = Vec3::new(
+                rng.random_range(-0.4..0.4),
+                rng.random_range(-0.4..0.4),
+                1.0,
+            )
+            .normalize()
+                / 5.0;
+            let (mut x1, mut x2) = (Vec::new(), Vec::new());
+            let mut ok = true;
+            for _ in 0..60 {
+                let y = Vec3::new(
+                    rng.random_range(-0.5..0.5),
+                    rng.random_range(-0.4..0.4),
+                    1.0,
+                );
+                let depth = 1.0 / n.dot(&y);
+                let x = r * (y * depth) + t;
+                ok &= depth > 0.0 && x.z > 0.0;
+                x1.push(y.xy());
+                x2.push(x.xy() / x.z);
+            }
+            if ok {
+                return (
+                    PlanarMotion {
+                        pose: Pose { r, t },
+                        normal: n,
+                    },
+                    x1,
+                    x2,
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn a_homography_decomposes_into_its_motion_and_the_twin_that_induces_it_too() {
+        let mut twins = 0;
+        for seed in 0..40 {
+            let (truth, x1, x2) = planar_scene(seed);
+            let h = truth.pose.r + truth.pose.t * truth.normal.transpose();
+            // Any scale and sign of H.
+            let scale = if seed % 2 == 0 { 3.7 } else { -0.02 };
+            let found = decompose_homography(&(h * scale), &x1, &x2, 1.0).unwrap();
+            assert!(
+                (1..=2).contains(&found.len()),
+                "seed {seed}: {}",
+                found.len()
+            );
+            // The truth in the decomposition's units: n unit, t over the plane's distance.
+            let d = 1.0 / truth.normal.norm();
+            let exact = |m: &PlanarMotion| {
+                (m.pose.r - truth.pose.r).norm() < 1e-9
+                    && (m.pose.t - truth.pose.t / d).norm() < 1e-9
+                    && (m.normal - truth.normal * d).norm() < 1e-9
+            };
+            assert_eq!(found.iter().filter(|m| exact(m)).count(), 1, "seed {seed}");
+            for m in &found {
+                // Every decomposition is a motion (R a rotation) that induces the same H and
+                // keeps the points in front of both cameras.
+                let r = m.pose.r;
+                assert!((r.transpose() * r - Mat3::identity()).norm() < 1e-9);
+                assert!((r.determinant() - 1.0).abs() < 1e-9);
+                assert!((r + m.pose.t * m.normal.transpose() - h).norm() < 1e-9 * h.norm());
+                for (a, b) in x1.iter().zip(&x2) {
+                    let y = Vec3::new(a.x, a.y, 1.0);
+                    let depth = 1.0 / m.normal.dot(&y);
+                    let x = r * (y * depth) + m.pose.t;
+                    assert!(depth > 0.0 && x.z > 0.0);
+                    assert!((x.xy() / x.z - b).norm() < 1e-9);
+                }
+            }
+            twins += usize::from(found.len() == 2);
+        }
+        // The twin is physically valid in many of these scenes.
+        assert!(twins >= 10, "{twins} of 40");
+    }
+
+    #[test]
+    fn a_rotation_or_a_singular_map_has_no_planar_decomposition() {
+        let (truth, x1, x2) = planar_scene(1);
+        assert!(
+            decompose_homography(&truth.pose.r, &x1, &x2, 0.9)
+                .unwrap()
+                .is_empty()
+        );
+        assert!(
+            decompose_homography(&Mat3::zeros(), &x1, &x2, 0.9)
+                .unwrap()
+                .is_empty()
+        );
+        let e = decompose_homography(&truth.pose.r, &x1, &x2[..3], 0.9);
+        assert!(matches!(e, Err(GeomError::LengthMismatch { .. })), "{e:?}");
     }
 }
