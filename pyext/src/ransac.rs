@@ -1,5 +1,6 @@
 //! Bindings of the robust estimators (`affcorr::ransac`): `estimate_homography`,
-//! `estimate_fundamental`, `estimate_relative_pose` and their `_batch` forms.
+//! `estimate_fundamental`, `estimate_relative_pose` and their `_batch` forms, and
+//! `planar_twin`.
 //!
 //! The Python package (`affcorr.estimation`) wraps these into `(model, info)` pairs of frozen
 //! dataclasses; here each function returns plain arrays and an `info` dict.
@@ -25,6 +26,7 @@ use affcorr::ransac::problems::relpose::PoseModel;
 use affcorr::ransac::{
     AffineRefinement, Correspondences, Estimate, EstimatorOptions, LoKind, RansacError, SampleKind,
     SamplerKind, ScoringKind, estimate_fundamental, estimate_homography, estimate_relative_pose,
+    planar_twin,
 };
 use numpy::{PyArray1, PyArrayDyn};
 use pyo3::exceptions::PyValueError;
@@ -36,6 +38,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(estimate_homography_py, m)?)?;
     m.add_function(wrap_pyfunction!(estimate_fundamental_py, m)?)?;
     m.add_function(wrap_pyfunction!(estimate_relative_pose_py, m)?)?;
+    m.add_function(wrap_pyfunction!(planar_twin_py, m)?)?;
     m.add_function(wrap_pyfunction!(estimate_homography_batch_py, m)?)?;
     m.add_function(wrap_pyfunction!(estimate_fundamental_batch_py, m)?)?;
     m.add_function(wrap_pyfunction!(estimate_relative_pose_batch_py, m)?)?;
@@ -383,6 +386,56 @@ fn estimate_relative_pose_py<'py>(
         estimate_relative_pose(d, &k1, &k2, o)
     })?;
     pose_result(py, &o)
+}
+
+/// The twin of a planar relative pose (`affcorr::ransac::planar_twin`): `None`, or
+/// `(R, t, normal, planar_share)`. Runs with the GIL released.
+#[pyfunction]
+#[pyo3(name = "planar_twin", signature = (corrs, K1, K2, R, t, inliers, threshold))]
+#[allow(non_snake_case, clippy::too_many_arguments)]
+fn planar_twin_py<'py>(
+    py: Python<'py>,
+    corrs: &Bound<'py, PyAny>,
+    K1: &Bound<'py, PyAny>,
+    K2: &Bound<'py, PyAny>,
+    R: &Bound<'py, PyAny>,
+    t: &Bound<'py, PyAny>,
+    inliers: &Bound<'py, PyAny>,
+    threshold: f64,
+) -> PyResult<Option<(Array<'py>, Array<'py>, Array<'py>, f64)>> {
+    let k1 = crate::geom::intrinsics(K1, "K1")?;
+    let k2 = crate::geom::intrinsics(K2, "K2")?;
+    let r = crate::geom::matrix3(R, "R")?;
+    let t = F64Array::extract(t, "t")?.expect(&[Dim::Is(3)])?;
+    let t = affcorr::geom::Vec3::from_column_slice(t.as_slice());
+    if !(t.iter().all(|v| v.is_finite()) && t.norm() > 0.0) {
+        return Err(value_error("t must be a finite, non-zero 3-vector"));
+    }
+    let a = F64Array::extract(corrs, "corrs")?.expect_one_of(&CORRS)?;
+    let mask = F64Array::extract(inliers, "inliers")?.expect(&[N])?;
+    if mask.as_slice().iter().any(|&v| v != 0.0 && v != 1.0) {
+        return Err(value_error(
+            "inliers must be a boolean mask (one flag per correspondence), not indices",
+        ));
+    }
+    let flags: Vec<bool> = mask.as_slice().iter().map(|&v| v == 1.0).collect();
+    let (slice, width) = (a.as_slice(), a.shape()[1]);
+    let pose = affcorr::geom::epipolar::Pose { r, t };
+    let twin = py
+        .detach(|| {
+            let data = rows_to_corrs(slice, width)?;
+            planar_twin(&data, &k1, &k2, &pose, &flags, threshold)
+        })
+        .map_err(value_error)?;
+    twin.map(|w| {
+        Ok((
+            mat3_to_numpy(py, &w.pose.r)?,
+            to_numpy(py, &[3], w.pose.t.iter().copied().collect())?,
+            to_numpy(py, &[3], w.normal.iter().copied().collect())?,
+            w.planar_share,
+        ))
+    })
+    .transpose()
 }
 
 // --- batches --------------------------------------------------------------------------------------

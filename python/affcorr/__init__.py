@@ -52,6 +52,7 @@ from ._native import (
 from .estimation import (
     ESTIMATOR_OPTIONS,
     PairError,
+    PlanarTwin,
     RansacInfo,
     RelativePose,
     estimate_fundamental,
@@ -60,6 +61,7 @@ from .estimation import (
     estimate_homography_batch,
     estimate_relative_pose,
     estimate_relative_pose_batch,
+    planar_twin,
 )
 from .pipeline import PIPELINE_DEFAULTS, MatchResult, Pipeline
 from .shape import (
@@ -75,6 +77,7 @@ __all__ = [
     "__version__",
     "ESTIMATOR_OPTIONS",
     "PairError",
+    "PlanarTwin",
     "RansacInfo",
     "RelativePose",
     "estimate_fundamental",
@@ -83,6 +86,7 @@ __all__ = [
     "estimate_homography_batch",
     "estimate_relative_pose",
     "estimate_relative_pose_batch",
+    "planar_twin",
     "MatchResult",
     "PIPELINE_DEFAULTS",
     "Pipeline",

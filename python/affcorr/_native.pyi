@@ -170,6 +170,17 @@ def estimate_relative_pose(
 ]:
     """Robust X2 = R X1 + t: ((R, t, E, F), info); |t| = 1; GIL released."""
 
+def planar_twin(
+    corrs: ArrayLike,
+    K1: ArrayLike,
+    K2: ArrayLike,
+    R: ArrayLike,
+    t: ArrayLike,
+    inliers: ArrayLike,
+    threshold: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float] | None:
+    """The twin of a planar relative pose: (R, t, normal, planar_share) or None; GIL released."""
+
 def estimate_homography_batch(
     corrs: Sequence[ArrayLike], **options: Any
 ) -> list[tuple[NDArray[np.float64], dict[str, Any]] | ValueError]:

@@ -110,6 +110,7 @@ from . import _native
 __all__ = [
     "ESTIMATOR_OPTIONS",
     "PairError",
+    "PlanarTwin",
     "RansacInfo",
     "RelativePose",
     "estimate_fundamental",
@@ -118,6 +119,7 @@ __all__ = [
     "estimate_homography_batch",
     "estimate_relative_pose",
     "estimate_relative_pose_batch",
+    "planar_twin",
 ]
 
 #: Names of the keyword options (besides ``threshold`` and ``seed``) that every estimator takes.
@@ -189,6 +191,23 @@ class RelativePose:
     def __repr__(self) -> str:
         t = np.array2string(self.t, precision=4, suppress_small=True, separator=", ")
         return f"RelativePose(angle={np.degrees(self.angle):.4g} deg, t={t})"
+
+
+@dataclass(frozen=True, eq=False)
+class PlanarTwin:
+    """The other motion of a relative pose whose inliers lie on one plane (:func:`planar_twin`).
+
+    Attributes:
+        R: ``(3, 3)`` rotation of the twin.
+        t: ``(3,)`` its unit translation.
+        normal: ``(3,)`` the unit normal of its plane in camera 1 (``n^T X1 = d > 0``).
+        planar_share: the share of the pose's inliers that one homography explains.
+    """
+
+    R: NDArray[np.float64]
+    t: NDArray[np.float64]
+    normal: NDArray[np.float64]
+    planar_share: float
 
 
 class PairError(Exception):
@@ -362,6 +381,57 @@ def estimate_relative_pose(
         corrs, K1, K2, threshold=threshold, seed=seed, **options
     )
     return _pose(m), _info(info)
+
+
+def planar_twin(
+    corrs: ArrayLike,
+    K1: ArrayLike,  # noqa: N803
+    K2: ArrayLike,  # noqa: N803
+    pose: RelativePose,
+    inliers: ArrayLike,
+    *,
+    threshold: float = 2.0,
+) -> PlanarTwin | None:
+    """The twin of a relative pose whose inliers lie on one plane, or ``None``.
+
+    Two calibrated views of one plane have two motions (with their planes) that put the
+    matches in front of both cameras and induce the same homography, hence the same points and
+    the same ``A`` of every AC: the estimate is one of them by the noise alone
+    (docs/estimation.md, "One plane"). This fits a homography to the pose's inliers (affcorr's
+    RANSAC on their points, transfer error below ``threshold`` pixels); when it explains at
+    least 80% of them (COLMAP's planar test), it decomposes the homography and returns the
+    physically valid decomposition farther from ``pose``. ``None``: the pose is not planar,
+    only one decomposition is valid, or fewer than 8 inliers.
+
+    Args:
+        corrs: the ``(N, 8)`` ACs or ``(N, 4)`` points the pose was estimated on (pixels).
+        K1, K2: ``(3, 3)`` intrinsics of the two cameras.
+        pose: the :class:`RelativePose` (``R`` and ``t`` are used).
+        inliers: ``(N,)`` bool, its inliers (``info.inliers``).
+        threshold: inlier threshold of the homography's transfer error, pixels.
+
+    Returns:
+        A :class:`PlanarTwin` or ``None``.
+
+    Example (one plane: the estimate and its twin explain the matches equally):
+        >>> import numpy as np, affcorr
+        >>> K = np.array([[500.0, 0, 320], [0, 500, 240], [0, 0, 1]])
+        >>> c, s = np.cos(0.1), np.sin(0.1)
+        >>> R = np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+        >>> t, n = np.array([-1.0, 0, 0.3]), np.array([0, 0, 1.0])
+        >>> H = K @ (R + np.outer(t, n) / 4.0) @ np.linalg.inv(K)  # the plane z = 4
+        >>> x1 = np.random.default_rng(0).uniform(0, 480, (100, 2))
+        >>> corrs = affcorr.correspondences_from_homography(H, x1)
+        >>> pose, info = affcorr.estimate_relative_pose(corrs, K, K)
+        >>> twin = affcorr.planar_twin(corrs, K, K, pose, info.inliers)
+        >>> twin.planar_share
+        1.0
+        >>> truth = [np.allclose(p.R, R, atol=1e-6) for p in (pose, twin)]
+        >>> sorted(truth)  # one of the two is the true motion
+        [False, True]
+    """
+    out = _native.planar_twin(corrs, K1, K2, pose.R, pose.t, np.asarray(inliers), float(threshold))
+    return None if out is None else PlanarTwin(out[0], out[1], out[2], float(out[3]))
 
 
 def estimate_homography_batch(

@@ -60,6 +60,7 @@ pub mod graph_cut;
 mod local_opt;
 pub mod loss;
 pub mod options;
+pub mod planar;
 pub mod problem;
 pub mod problems;
 pub mod refine;
@@ -76,5 +77,6 @@ pub use estimators::{
     estimate_homography_batch, estimate_relative_pose, estimate_relative_pose_batch,
 };
 pub use options::{AffineRefinement, LoKind, RansacOptions};
+pub use planar::{PLANAR_SHARE, PlanarTwin, planar_twin};
 pub use problem::Problem;
 pub use problems::{Correspondences, SampleKind};

@@ -12,7 +12,7 @@
 //! |---|---|---|
 //! | [`geom`] | the conventions (docs/design.md §2) and everything that is pure geometry: the AC type and the `(N, 8)` layout, `A = s·R(θ)·A′(A″)` synthesis and decomposition, kornia LAFs, ACs a homography induces, normalised coordinates, Sampson distances with gradients, E/F/pose utilities, exact synthetic scenes | always |
 //! | [`solvers`] | minimal and non-minimal solvers: H from 4 points / 2 ACs / 1 AC + F, F from 7 points / 8 points / 3 ACs, E from 5 points / 2 ACs / 8 points, relative poses; allocation-free, writing into your buffer | always |
-//! | [`ransac`] | robust estimation: [`ransac::estimate_homography`], [`ransac::estimate_fundamental`], [`ransac::estimate_relative_pose`] and their parallel `_batch` forms, with PROSAC, MSAC / MAGSAC++, SPRT, local optimisation and a final refinement | always |
+//! | [`ransac`] | robust estimation: [`ransac::estimate_homography`], [`ransac::estimate_fundamental`], [`ransac::estimate_relative_pose`] and their parallel `_batch` forms, with PROSAC, MSAC / MAGSAC++, SPRT, local optimisation and a final refinement; [`ransac::planar_twin`], the other motion of a pose whose inliers lie on one plane | always |
 //! | [`image`] | gray and colour images, PNG/JPEG decoding, resizing, 32×32 patches, the affine Lucas–Kanade refinement of ACs | `image` |
 //! | [`runner`] | the ONNX networks through ONNX Runtime: the XFeat matchers, dense `dense-warp-v1` matchers (DKM, RoMa exports) and the shape network (images + matches → ACs) | `onnx` |
 //! | [`pipeline`] | [`Pipeline`]: two images → matches → ACs → H, F or relative pose, timed per stage, with one set of [`pipeline::defaults`] | `pipeline` |
@@ -128,6 +128,9 @@
 //! assert!(t.dot(&scene.pose.t.normalize()) > 0.99);
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+//!
+//! When the inliers lie on one plane (`planes: 1`), a second motion explains them as well,
+//! points and A alike; [`ransac::planar_twin`] says so and returns it (docs/estimation.md).
 //!
 //! ## A minimal solver
 //!
