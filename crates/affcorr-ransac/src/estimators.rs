@@ -76,9 +76,10 @@ pub struct EstimatorOptions {
 /// The default weight λ (px²) of the affine residual in scoring F and relative poses from ACs:
 /// the weight of "the affine part is accurate too" of the stopping rule (a circle of radius 10
 /// px mapped by A, problems::SEED_AFFINE_WEIGHT). On the scene families
-/// (benches/results/scene_families.md) it removes the planar and narrow-baseline ambiguities
-/// that points leave (one plane: 0.38° / 1.1° instead of 1.2° / 1.8° for the relative pose)
-/// at a cost of ≤ 1.3× where A is noisy (10%); H gains nothing from it (up to 1.45× worse).
+/// (benches/results/scene_families.md) it makes E on one plane and on narrow baselines, where
+/// points fix it poorly, several times more accurate, at a small cost where A is noisy (10%);
+/// H gains nothing from it. It cannot choose between a plane's two motions, which fit every AC
+/// exactly ([`crate::planar`]).
 pub const DEFAULT_AFFINE_WEIGHT: f64 = 50.0;
 
 /// The default affine term gives way to points when it costs too many inliers. The
@@ -89,7 +90,7 @@ pub const DEFAULT_AFFINE_WEIGHT: f64 = 50.0;
 /// on repetitive texture (a chessboard) wrong A of a consistent subset let a model with half the
 /// true inliers win the affine score (benches/results/scene_families.real.md). The estimate is
 /// then the points-scored one (whose final refinement still weighs A by its own estimated noise
-/// scale). An uncapped term is what removes the planar and narrow-baseline ambiguities (a cap at
+/// scale). An uncapped term is what gives the one-plane and narrow-baseline gains (a cap at
 /// threshold²/4 lost them: benches/results/scene_families.md), and there both models explain
 /// about as many points, so the affine one is kept.
 pub const DEFAULT_AFFINE_FALLBACK: f64 = 0.8;
