@@ -124,12 +124,16 @@ pub fn decompose_homography(
     in_front: f64,
 ) -> Result<Vec<PlanarMotion>> {
     check_len("x2", x1.len(), x2.len())?;
-    let mut sv = h.singular_values();
-    sv.as_mut_slice().sort_by(|a, b| b.total_cmp(a));
-    if !(sv[1] > 0.0 && sv.iter().all(|v| v.is_finite())) {
+    // HᵀH's eigenvalues are the squared singular values of H: σ₂² scales H, and the
+    // eigenvectors are those of the scaled H's HᵀH (whose sign does not change it).
+    let eig = (h.transpose() * h).symmetric_eigen();
+    let mut order = [0, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let middle = eig.eigenvalues[order[1]];
+    if !(middle > 0.0 && eig.eigenvalues.iter().all(|v| v.is_finite())) {
         return Ok(Vec::new());
     }
-    let mut hn = h / sv[1];
+    let mut hn = h / middle.sqrt();
     let p = |x: &Vec2| Vec3::new(x.x, x.y, 1.0);
     let positive = x1
         .iter()
@@ -139,10 +143,10 @@ pub fn decompose_homography(
     if 2 * positive < x1.len() {
         hn = -hn;
     }
-    let eig = (hn.transpose() * hn).symmetric_eigen();
-    let mut order = [0, 1, 2];
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let (s1, s3) = (eig.eigenvalues[order[0]], eig.eigenvalues[order[2]]);
+    let (s1, s3) = (
+        eig.eigenvalues[order[0]] / middle,
+        eig.eigenvalues[order[2]] / middle,
+    );
     let v = |k: usize| eig.eigenvectors.column(order[k]).into_owned();
     let (v1, v2, v3) = (v(0), v(1), v(2));
     if s1 - s3 < 1e-9 * s1.abs().max(1.0) {

@@ -99,17 +99,9 @@ pub fn planar_twin(
     if motions.len() < 2 {
         return Ok(None);
     }
-    let distance = |m: &Pose| {
-        let rotation = ((m.r.transpose() * pose.r).trace() - 1.0) / 2.0;
-        let direction = m.t.normalize().dot(&pose.t.normalize());
-        rotation
-            .clamp(-1.0, 1.0)
-            .acos()
-            .max(direction.clamp(-1.0, 1.0).acos())
-    };
     let twin = motions
         .iter()
-        .max_by(|a, b| distance(&a.pose).total_cmp(&distance(&b.pose)))
+        .max_by(|a, b| distance(&a.pose, pose).total_cmp(&distance(&b.pose, pose)))
         .expect("two motions");
     Ok(Some(PlanarTwin {
         pose: Pose {
@@ -119,6 +111,17 @@ pub fn planar_twin(
         normal: twin.normal,
         planar_share,
     }))
+}
+
+/// The larger of the rotation angle between two motions and the angle between their
+/// translation directions, radians.
+fn distance(a: &Pose, b: &Pose) -> f64 {
+    let rotation = ((a.r.transpose() * b.r).trace() - 1.0) / 2.0;
+    let direction = a.t.normalize().dot(&b.t.normalize());
+    rotation
+        .clamp(-1.0, 1.0)
+        .acos()
+        .max(direction.clamp(-1.0, 1.0).acos())
 }
 
 #[cfg(test)]
@@ -146,15 +149,7 @@ mod tests {
     }
 
     fn angle(a: &Pose, b: &Pose) -> f64 {
-        let r = (((a.r.transpose() * b.r).trace() - 1.0) / 2.0)
-            .clamp(-1.0, 1.0)
-            .acos();
-        let t =
-            a.t.normalize()
-                .dot(&b.t.normalize())
-                .clamp(-1.0, 1.0)
-                .acos();
-        r.max(t).to_degrees()
+        distance(a, b).to_degrees()
     }
 
     #[test]
