@@ -373,6 +373,14 @@ def _views(rng, planes, K1, K2, R2, C2, with_depth: bool) -> dict | None:
     return out
 
 
+def _look_at(forward) -> np.ndarray:
+    """World-to-camera rotation of an upright camera (y down) looking along ``forward``."""
+    z = np.asarray(forward, float) / np.linalg.norm(forward)
+    x = np.cross([0.0, 1.0, 0.0], z)
+    x /= np.linalg.norm(x)
+    return np.stack([x, np.cross(z, x), z])
+
+
 def render_pair(index: int, seed: int = 0, *, with_depth: bool = False) -> dict:
     """Synthetic pair ``index``: img1, img2 (uint8), K1, K2, R, t (unit), covisible (and the
     views' depth maps depth1, depth2 with ``with_depth``: inf where no plane is hit)."""
@@ -389,33 +397,40 @@ def render_pair(index: int, seed: int = 0, *, with_depth: bool = False) -> dict:
         direction /= np.linalg.norm(direction)
         target = np.array([0, 0, 6.5]) + rng.normal(0, 0.3, 3)
         C2 = direction * np.linalg.norm(target) * math.tan(angle)
-        z = (target - C2) / np.linalg.norm(target - C2)
-        x = np.cross([0.0, 1.0, 0.0], z)
-        x /= np.linalg.norm(x)
-        R2 = _rot("z", rng.uniform(-0.2, 0.2)) @ np.stack([x, np.cross(z, x), z])
+        R2 = _rot("z", rng.uniform(-0.2, 0.2)) @ _look_at(target - C2)
         out = _views(rng, planes, K1, K2, R2, C2, with_depth)
         if out is not None:
             return out
     raise RuntimeError(f"synthetic pair {index}: no usable draw in 50 attempts")
 
 
-def synthetic_pairs(count: int, seed: int = 0) -> list[PosePair]:
-    """The first ``count`` synthetic pairs (rendered once, then read from the cache)."""
-    d = pose_cache() / f"{SYNTH_VERSION}-seed{seed}"
+def _cached_pairs(
+    folder: str, dataset: str, count: int, render: Callable[[int], dict]
+) -> list[PosePair]:
+    """The first ``count`` pairs that ``render(i)`` draws, rendered once into the pose cache's
+    ``folder`` and then read from it; images load on demand."""
+    d = pose_cache() / folder
     d.mkdir(parents=True, exist_ok=True)
     out = []
     for i in range(count):
         path = d / f"{i:04d}.npz"
         if not path.exists():
-            np.savez_compressed(path, **render_pair(i, seed))
+            np.savez_compressed(path, **render(i))
         z = np.load(path)
 
         def load(path=path):
             zz = np.load(path)
             return zz["img1"], zz["img2"]
 
-        out.append(PosePair("synthetic", f"{i:04d}", z["K1"], z["K2"], z["R"], z["t"], load))
+        out.append(PosePair(dataset, f"{i:04d}", z["K1"], z["K2"], z["R"], z["t"], load))
     return out
+
+
+def synthetic_pairs(count: int, seed: int = 0) -> list[PosePair]:
+    """The first ``count`` synthetic pairs (rendered once, then read from the cache)."""
+    return _cached_pairs(
+        f"{SYNTH_VERSION}-seed{seed}", "synthetic", count, lambda i: render_pair(i, seed)
+    )
 
 
 # --- rendered low-texture rooms ---------------------------------------------------------------
@@ -424,14 +439,6 @@ ROOM_VERSION = "rooms-v1"
 ROOM_ROLL = (0.0, 10.0)  # |roll| of camera 2 about its optical axis (deg), upright set
 ROOM_ROLL_ROTATED = (60.0, 180.0)  # rotated set
 _ROOM_TAG, _ROLL_TAG = 0x524F4F4D, 0x524F4C4C  # random streams of their own ("ROOM", "ROLL")
-
-
-def _look_at(forward) -> np.ndarray:
-    """World-to-camera rotation of an upright camera (y down) looking along ``forward``."""
-    z = np.asarray(forward, float) / np.linalg.norm(forward)
-    x = np.cross([0.0, 1.0, 0.0], z)
-    x /= np.linalg.norm(x)
-    return np.stack([x, np.cross(z, x), z])
 
 
 def _room(rng) -> tuple[list[_Plane], np.ndarray, tuple[np.ndarray, np.ndarray]]:
@@ -546,22 +553,12 @@ def room_pairs(count: int, seed: int = 0, roll: tuple[float, float] = ROOM_ROLL)
     """The first ``count`` room pairs with |roll| in ``roll`` (degrees): ROOM_ROLL upright,
     ROOM_ROLL_ROTATED rolled (rendered once, then read from the cache)."""
     lo, hi = roll
-    d = pose_cache() / f"{ROOM_VERSION}-seed{seed}-roll{lo:g}-{hi:g}"
-    d.mkdir(parents=True, exist_ok=True)
-    dataset = "rooms" if hi <= 45 else "rooms-rolled"
-    out = []
-    for i in range(count):
-        path = d / f"{i:04d}.npz"
-        if not path.exists():
-            np.savez_compressed(path, **room_pair(i, seed, roll))
-        z = np.load(path)
-
-        def load(path=path):
-            zz = np.load(path)
-            return zz["img1"], zz["img2"]
-
-        out.append(PosePair(dataset, f"{i:04d}", z["K1"], z["K2"], z["R"], z["t"], load))
-    return out
+    return _cached_pairs(
+        f"{ROOM_VERSION}-seed{seed}-roll{lo:g}-{hi:g}",
+        "rooms" if hi <= 45 else "rooms-rolled",
+        count,
+        lambda i: room_pair(i, seed, roll),
+    )
 
 
 DATASETS = {
