@@ -292,30 +292,38 @@ where
             if lo_indices.len() < m || lo_indices == previous {
                 break;
             }
-            let Some(refined) = problem.refine(
-                &best.model,
-                &lo_indices,
-                // The scoring's own cost: the refined model optimises what the score measures.
-                &scoring.refinement_loss(),
-                &LmOptions {
-                    max_iterations: FINAL_LM_ITERATIONS,
-                    noise_fraction: FINAL_NOISE_FRACTION,
-                    affine: options.affine_refinement != AffineRefinement::Off,
-                    ..Default::default()
-                },
-            ) else {
-                break;
-            };
-            let to_beat = if affine { floor } else { best.score };
-            match score_model(
-                problem,
-                scoring,
-                &refined,
-                to_beat,
-                usize::MAX,
-                &mut scratch,
-            ) {
-                Some(e) if e.score > to_beat => {
+            // The affine refinement first; if its model scores too low on the point
+            // residuals (the ACs pull it away from what the points support), the points-only
+            // refinement, which must beat the score outright.
+            let attempts: &[bool] = if affine { &[true, false] } else { &[false] };
+            let mut improved = false;
+            for &with_affine in attempts {
+                let Some(refined) = problem.refine(
+                    &best.model,
+                    &lo_indices,
+                    // The scoring's own cost: the refined model optimises what the score
+                    // measures.
+                    &scoring.refinement_loss(),
+                    &LmOptions {
+                        max_iterations: FINAL_LM_ITERATIONS,
+                        noise_fraction: FINAL_NOISE_FRACTION,
+                        affine: with_affine,
+                        ..Default::default()
+                    },
+                ) else {
+                    continue;
+                };
+                let to_beat = if with_affine { floor } else { best.score };
+                if let Some(e) = score_model(
+                    problem,
+                    scoring,
+                    &refined,
+                    to_beat,
+                    usize::MAX,
+                    &mut scratch,
+                )
+                .filter(|e| e.score > to_beat)
+                {
                     scratch.keep(&refined);
                     best = Scored {
                         model: refined,
@@ -324,8 +332,12 @@ where
                         wide_support: e.wide_support,
                     };
                     refinements += 1;
+                    improved = true;
+                    break;
                 }
-                _ => break,
+            }
+            if !improved {
+                break;
             }
             std::mem::swap(&mut previous, &mut lo_indices);
         }
@@ -373,6 +385,10 @@ mod tests {
         x: Vec<f64>,
         y: Vec<f64>,
         lo_refines: bool,
+        /// `None`: `refine` fails. `Some(offset)`: it returns the least-squares line, moved up
+        /// by `offset` when asked for the affine terms (an affine refinement that pulls the
+        /// model away from what the points support), and the problem refines affine terms.
+        refinement: Option<f64>,
         /// The options of every `refine` call.
         refine_calls: std::sync::Mutex<Vec<LmOptions>>,
     }
@@ -415,12 +431,17 @@ mod tests {
         fn refine(
             &self,
             _: &(f64, f64),
-            _: &[usize],
+            inliers: &[usize],
             _: &Loss,
             options: &LmOptions,
         ) -> Option<(f64, f64)> {
             self.refine_calls.lock().unwrap().push(*options);
-            None
+            let offset = self.refinement?;
+            let (a, b) = self.fit_nonminimal(inliers, None)?;
+            Some((a, if options.affine { b + offset } else { b }))
+        }
+        fn refines_affine(&self) -> bool {
+            self.refinement.is_some()
         }
         fn lo_refines(&self) -> bool {
             self.lo_refines
@@ -446,6 +467,7 @@ mod tests {
             x,
             y,
             lo_refines: true,
+            refinement: None,
             refine_calls: Default::default(),
         };
         (line, truth)
@@ -519,6 +541,39 @@ mod tests {
     }
 
     #[test]
+    fn a_rejected_affine_refinement_falls_back_to_the_points_only_one() {
+        let opts = RansacOptions {
+            threshold: 0.3,
+            affine_refinement: AffineRefinement::Final,
+            ..Default::default()
+        };
+        let final_calls = |line: Line| {
+            let calls = line.refine_calls.into_inner().unwrap();
+            calls
+                .iter()
+                .filter(|o| o.max_iterations == FINAL_LM_ITERATIONS)
+                .map(|o| o.affine)
+                .collect::<Vec<_>>()
+        };
+        // Half the threshold off: the affine model loses far more than the slack and is
+        // rejected, and the points-only refinement replaces it (not the unrefined model).
+        let (mut line, truth) = noisy_line(500, 0.5, 3);
+        line.refinement = Some(0.15);
+        let est = estimate(&line, &mut UniformSampler, &Msac::new(0.3), &opts).unwrap();
+        let inliers: Vec<usize> = (0..500).filter(|&i| est.inliers[i]).collect();
+        let found = inliers.iter().filter(|&&i| truth[i]).count();
+        assert!(found * 100 >= 99 * truth.iter().filter(|&&t| t).count());
+        assert_eq!(Some(est.model), line.fit_nonminimal(&inliers, None));
+        assert_eq!(final_calls(line)[..2], [true, false]);
+        // A negligible pull is within the slack: the affine model is kept, no fallback.
+        let (mut line, _) = noisy_line(500, 0.5, 3);
+        line.refinement = Some(1e-6);
+        let est = estimate(&line, &mut UniformSampler, &Msac::new(0.3), &opts).unwrap();
+        assert!(est.refinements >= 1);
+        assert!(final_calls(line).iter().all(|&affine| affine));
+    }
+
+    #[test]
     fn same_seed_same_result_other_seed_may_differ() {
         let (line, _) = noisy_line(500, 0.5, 4);
         let opts = RansacOptions {
@@ -580,6 +635,7 @@ mod tests {
             x: vec![1.0; 10],
             y: (0..10).map(f64::from).collect(),
             lo_refines: true,
+            refinement: None,
             refine_calls: Default::default(),
         };
         let e = estimate(

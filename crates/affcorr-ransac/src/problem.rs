@@ -83,9 +83,11 @@ pub trait Problem: Sync {
     }
 
     /// Whether [`Problem::refine`] adds affine terms when [`LmOptions::affine`] asks for them
-    /// (F and the relative pose on AC data with some confidence above 0). The final refinement
-    /// then accepts a model that scores slightly lower on the point residuals (engine). Default
-    /// false.
+    /// (H, F and the relative pose on AC data with some confidence above 0). The final
+    /// refinement then accepts a model that scores slightly lower on the point residuals, and
+    /// falls back to the points-only refinement when it scores lower still (engine). A problem
+    /// that adds affine terms without saying so has every such model held to the points-only
+    /// score. Default false.
     fn refines_affine(&self) -> bool {
         false
     }

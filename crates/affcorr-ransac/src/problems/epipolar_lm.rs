@@ -88,11 +88,12 @@ pub(crate) fn rescale_again(
 }
 
 /// The median of χ²₁.
-const CHI2_1_MEDIAN: f64 = 0.454_936_423_119_572_8;
+pub(crate) const CHI2_1_MEDIAN: f64 = 0.454_936_423_119_572_8;
 
-/// Largest λ (px² per unit² of A) that [`affine_scale`] returns: A exact to 0.05% at 0.5 px of
-/// point noise. The affine terms of exact ACs then dominate, as they should, without making the
-/// normal equations singular in the directions points alone fix.
+/// Largest λ (px² per unit² of A) that [`affine_scale`] and the homography's affine terms
+/// return: A exact to 0.05% at 0.5 px of point noise. The affine terms of exact ACs then
+/// dominate, as they should, without making the normal equations singular in the directions
+/// points alone fix.
 pub(crate) const MAX_AFFINE_SCALE: f64 = 1e6;
 
 /// (λ, median SD_P) estimated on `indices` under `f`: λ is the median SD_P over the median

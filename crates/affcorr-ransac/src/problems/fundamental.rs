@@ -224,7 +224,7 @@ impl Problem for FundamentalProblem<'_> {
     }
 
     fn refines_affine(&self) -> bool {
-        self.data.has_affine() && self.confidence.is_none_or(|c| c.iter().any(|&v| v > 0.0))
+        self.data.has_usable_affine(self.confidence)
     }
 
     fn sample_support(&self, f: &Mat3, threshold_sq: f64) -> Option<usize> {

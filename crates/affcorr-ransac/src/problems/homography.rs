@@ -105,6 +105,10 @@ impl Problem for HomographyProblem<'_> {
         Some((&self.data.x1, &self.data.x2))
     }
 
+    fn refines_affine(&self) -> bool {
+        self.data.has_usable_affine(self.confidence)
+    }
+
     fn sample_size(&self) -> usize {
         match self.kind {
             SampleKind::Points => 4,

@@ -16,20 +16,12 @@
 //! `epipolar_lm`'s affine Sampson terms.
 
 use super::Correspondences;
+use super::epipolar_lm::{CHI2_1_MEDIAN, MAX_AFFINE_SCALE};
 use super::homography::HomographyProblem;
 use super::normal_eq::EntrySums;
 use crate::loss::Loss;
 use crate::refine::{LeastSquares, Mat9, Vec9};
 use affcorr_geom::{Mat2, Mat3, Vec2};
-
-/// The median of χ²₁.
-const CHI2_1_MEDIAN: f64 = 0.454_936_423_119_572_8;
-
-/// Largest λ: A exact to 0.5% at 0.5 px of point noise. With exact A ("A 0%" of
-/// benches/results/scene_families.md) the λ of the data is unbounded, but H's Jacobian at a
-/// noisy x1 is not that A; the cap of epipolar_lm (1e6) made that family 1.14× worse than
-/// points, 1e4 1.07× (and better than points in 11 of the other 14 families).
-const MAX_AFFINE_SCALE: f64 = 1e4;
 
 /// Most rounds of estimate-λ-then-refine: λ is first estimated at the points-only model.
 pub(crate) const AFFINE_ROUNDS: usize = 3;

@@ -121,6 +121,12 @@ impl Correspondences {
         !self.a.is_empty()
     }
 
+    /// True when the data carry affine maps and some AC has a `confidence` above 0 (all do
+    /// when `None`): whether a refinement with affine terms has any to add.
+    pub(crate) fn has_usable_affine(&self, confidence: Option<&[f64]>) -> bool {
+        self.has_affine() && confidence.is_none_or(|c| c.iter().any(|&v| v > 0.0))
+    }
+
     /// The AC at index `i` (requires affine data).
     #[inline]
     pub fn ac(&self, i: usize) -> AffineCorrespondence {

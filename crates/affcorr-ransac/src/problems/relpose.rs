@@ -164,7 +164,7 @@ impl Problem for RelativePoseProblem<'_> {
     }
 
     fn refines_affine(&self) -> bool {
-        self.pixels.has_affine() && self.confidence.is_none_or(|c| c.iter().any(|&v| v > 0.0))
+        self.pixels.has_usable_affine(self.confidence)
     }
 
     fn sample_support(&self, m: &PoseModel, threshold_sq: f64) -> Option<usize> {
