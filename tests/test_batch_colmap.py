@@ -4,6 +4,7 @@ imports it and registers every view."""
 
 from __future__ import annotations
 
+import affcorr
 import numpy as np
 import pytest
 
@@ -56,3 +57,51 @@ def test_colmap_database_reads_back_and_maps(images, tmp_path) -> None:  # noqa:
     assert recs, "COLMAP made no reconstruction"
     best = max(recs.values(), key=lambda r: r.num_reg_images())
     assert best.num_reg_images() == len(names) and best.num_points3D() > 50
+
+
+def _plane_acs(t, n_points: int = 150) -> tuple[np.ndarray, np.ndarray]:
+    """Exact ACs of the plane z = 4 seen by K, K with X2 = R X1 + t (R: 0.1 rad about y)."""
+    K = np.array([[500.0, 0.0, 320.0], [0.0, 500.0, 240.0], [0.0, 0.0, 1.0]])
+    c, s = np.cos(0.1), np.sin(0.1)
+    R = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    H = K @ (R + np.outer(t, [0.0, 0.0, 1.0]) / 4.0) @ np.linalg.inv(K)
+    x1 = np.random.default_rng(3).uniform(0, 480, (n_points, 2))
+    return affcorr.correspondences_from_homography(H, x1), K
+
+
+def test_a_planar_pose_is_planar_or_panoramic_with_its_twin(tmp_path) -> None:
+    from affcorr.batch import _outputs, _worker
+
+    config = dict(seed=0, geometries=["relative_pose"], thresholds={"relative_pose": 1.0})
+    plane, K = _plane_acs([-1.0, 0.0, 0.3])
+    task = dict(K0=K.tolist(), K1=K.tolist())
+    models = _worker._models(plane, np.ones(len(plane)), task, config)
+    assert models["planar_share"] == 1.0
+    np.testing.assert_allclose(models["twin_R"] @ models["twin_R"].T, np.eye(3), atol=1e-9)
+    p = np.c_[plane[:, :2], np.ones(len(plane))] @ models["planar_H"].T
+    np.testing.assert_allclose(p[:, :2] / p[:, 2:], plane[:, 2:4], atol=1e-6)
+    # The same motion seen on two planes (z = 4 and a plane tilted by 37 degrees): no twin.
+    c, s = np.cos(0.1), np.sin(0.1)
+    R = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    n2 = np.array([0.6, 0.0, 0.8])
+    H2 = K @ (R + np.outer([-1.0, 0.0, 0.3], n2) / 6.0) @ np.linalg.inv(K)
+    x1 = np.random.default_rng(4).uniform(0, 480, (150, 2))
+    two = np.vstack([plane, affcorr.correspondences_from_homography(H2, x1)])
+    models_two = _worker._models(two, np.ones(len(two)), task, config)
+    assert "twin_R" not in models_two and "planar_H" not in models_two
+    # COLMAP: PLANAR_OR_PANORAMIC with the plane's H; CALIBRATED without a twin.
+    db = _outputs.ColmapWriter(tmp_path / "database.db", ["a", "b"], {}, min_inliers=15)
+    try:
+        for acs, m, want in (
+            (plane, models, pycolmap.TwoViewGeometryConfiguration.PLANAR_OR_PANORAMIC),
+            (two, models_two, pycolmap.TwoViewGeometryConfiguration.CALIBRATED),
+        ):
+            n = len(acs)
+            record = dict(models=m, ac_keypoints=np.c_[np.arange(n), np.arange(n)])
+            tvg = db._geometry(record, np.c_[np.arange(n), np.arange(n)].astype(np.uint32))
+            assert tvg.config == want
+            assert len(tvg.inlier_matches) == m["pose_inliers"].sum()
+            if "planar_H" in m:
+                np.testing.assert_allclose(tvg.H, m["planar_H"])
+    finally:
+        db.close()

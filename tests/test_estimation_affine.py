@@ -193,6 +193,10 @@ def test_planar_twin_finds_the_other_motion_and_agrees_with_opencv():
     assert 0.98 <= twin.planar_share <= 1.0  # an outlier may sit on an epipolar line
     assert np.linalg.norm(twin.t) == pytest.approx(1.0)
     assert np.linalg.norm(twin.normal) == pytest.approx(1.0)
+    # The plane's homography maps every true match (the first 20 are outliers) exactly.
+    assert np.linalg.norm(twin.H) == pytest.approx(1.0)
+    p = np.c_[corrs[20:, :2], np.ones(len(corrs) - 20)] @ twin.H.T
+    np.testing.assert_allclose(p[:, :2] / p[:, 2:], corrs[20:, 2:4], atol=1e-6)
     truth = dict(R=R, t=t)
     errors = [max(sf.pose_errors(p.R, p.t, truth)) for p in (pose, twin)]
     assert min(errors) < 1e-3 and max(errors) > 5.0, errors  # one of them is the truth

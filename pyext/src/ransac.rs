@@ -388,8 +388,11 @@ fn estimate_relative_pose_py<'py>(
     pose_result(py, &o)
 }
 
+/// A planar twin for Python: `(R, t, normal, planar_share, H)`.
+type TwinTuple<'py> = (Array<'py>, Array<'py>, Array<'py>, f64, Array<'py>);
+
 /// The twin of a planar relative pose (`affcorr::ransac::planar_twin`): `None`, or
-/// `(R, t, normal, planar_share)`. Runs with the GIL released.
+/// `(R, t, normal, planar_share, H)`. Runs with the GIL released.
 #[pyfunction]
 #[pyo3(name = "planar_twin", signature = (corrs, K1, K2, R, t, inliers, threshold))]
 #[allow(non_snake_case, clippy::too_many_arguments)]
@@ -402,7 +405,7 @@ fn planar_twin_py<'py>(
     t: &Bound<'py, PyAny>,
     inliers: &Bound<'py, PyAny>,
     threshold: f64,
-) -> PyResult<Option<(Array<'py>, Array<'py>, Array<'py>, f64)>> {
+) -> PyResult<Option<TwinTuple<'py>>> {
     let k1 = crate::geom::intrinsics(K1, "K1")?;
     let k2 = crate::geom::intrinsics(K2, "K2")?;
     let r = crate::geom::matrix3(R, "R")?;
@@ -433,6 +436,7 @@ fn planar_twin_py<'py>(
             to_numpy(py, &[3], w.pose.t.iter().copied().collect())?,
             to_numpy(py, &[3], w.normal.iter().copied().collect())?,
             w.planar_share,
+            mat3_to_numpy(py, &w.homography)?,
         ))
     })
     .transpose()

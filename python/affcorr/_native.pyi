@@ -178,8 +178,12 @@ def planar_twin(
     t: ArrayLike,
     inliers: ArrayLike,
     threshold: float,
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float] | None:
-    """The twin of a planar relative pose: (R, t, normal, planar_share) or None; GIL released."""
+) -> (
+    tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float, NDArray[np.float64]]
+    | None
+):
+    """The twin of a planar relative pose: (R, t, normal, planar_share, H) or None; GIL
+    released."""
 
 def estimate_homography_batch(
     corrs: Sequence[ArrayLike], **options: Any

@@ -202,12 +202,15 @@ class PlanarTwin:
         t: ``(3,)`` its unit translation.
         normal: ``(3,)`` the unit normal of its plane in camera 1 (``n^T X1 = d > 0``).
         planar_share: the share of the pose's inliers that one homography explains.
+        H: ``(3, 3)`` that homography (pixels, ``p2 ~ H p1``, ``|H|_F = 1``), which the pose
+            and its twin both induce.
     """
 
     R: NDArray[np.float64]
     t: NDArray[np.float64]
     normal: NDArray[np.float64]
     planar_share: float
+    H: NDArray[np.float64]
 
 
 class PairError(Exception):
@@ -431,7 +434,7 @@ def planar_twin(
         [False, True]
     """
     out = _native.planar_twin(corrs, K1, K2, pose.R, pose.t, np.asarray(inliers), float(threshold))
-    return None if out is None else PlanarTwin(out[0], out[1], out[2], float(out[3]))
+    return None if out is None else PlanarTwin(out[0], out[1], out[2], float(out[3]), out[4])
 
 
 def estimate_homography_batch(

@@ -11,7 +11,7 @@ use crate::problems::Correspondences;
 use affcorr_geom::camera::Intrinsics;
 use affcorr_geom::epipolar::Pose;
 use affcorr_geom::homography::decompose_homography;
-use affcorr_geom::{Vec2, Vec3};
+use affcorr_geom::{Mat3, Vec2, Vec3};
 
 /// A pose is planar when one homography explains at least this share of its inliers (COLMAP's
 /// `max_H_inlier_ratio` for a planar two-view geometry).
@@ -30,6 +30,8 @@ pub struct PlanarTwin {
     pub normal: Vec3,
     /// The share of the pose's inliers that one homography explains (≥ [`PLANAR_SHARE`]).
     pub planar_share: f64,
+    /// That homography (pixels, x2 ~ H x1, ‖H‖_F = 1): the pose and its twin both induce it.
+    pub homography: Mat3,
 }
 
 /// The twin of the relative pose `pose` estimated on `data` (pixels) with the inlier flags
@@ -110,6 +112,7 @@ pub fn planar_twin(
         },
         normal: twin.normal,
         planar_share,
+        homography: h.model,
     }))
 }
 
@@ -128,10 +131,10 @@ fn distance(a: &Pose, b: &Pose) -> f64 {
 mod tests {
     use super::*;
     use crate::estimators::estimate_relative_pose;
+    use affcorr_geom::PointCorrespondence;
     use affcorr_geom::epipolar::essential_from_pose;
     use affcorr_geom::sampson::sampson_point;
     use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
-    use affcorr_geom::{Mat3, PointCorrespondence};
     use rand::SeedableRng;
 
     fn scene(seed: u64, planes: usize) -> (PlaneScene, Correspondences) {
@@ -169,6 +172,20 @@ mod tests {
             assert!(twin.planar_share >= PLANAR_SHARE, "seed {seed}");
             assert!((twin.pose.t.norm() - 1.0).abs() < 1e-12);
             assert!((twin.normal.norm() - 1.0).abs() < 1e-9);
+            // The plane's homography: the true one, up to scale (mean transfer over the image).
+            let h = twin.homography;
+            assert!((h.norm() - 1.0).abs() < 1e-9);
+            let truth_h = scene.homography();
+            let mut transfer = 0.0;
+            for (x, y) in (0..640)
+                .step_by(40)
+                .flat_map(|x| (0..480).step_by(40).map(move |y| (x, y)))
+            {
+                let p = Vec3::new(x as f64, y as f64, 1.0);
+                let (a, b) = (h * p, truth_h * p);
+                transfer += (a.xy() / a.z - b.xy() / b.z).norm() / 192.0;
+            }
+            assert!(transfer < 1.0, "seed {seed}: transfer {transfer} px");
             // A different motion ...
             assert!(angle(&twin.pose, &pose) > 1.0, "seed {seed}");
             // One of the two is the true motion.

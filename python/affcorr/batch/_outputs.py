@@ -9,12 +9,17 @@
   ``acs`` (N, 8), ``certainty``, ``reliable`` / ``affine_confidence`` (when the pipeline gives
   them), ``ac_keypoints`` (N, 2) (each AC's keypoint in image 0 and 1, -1 for none), and the
   models with their inlier masks over the ACs (``H``, ``H_inliers``, ``F``, ``F_inliers``,
-  ``R``, ``t``, ``E``, ``pose_inliers``); attributes ``checksum`` (of the inputs and options,
+  ``R``, ``t``, ``E``, ``pose_inliers``) and, when the pose's inliers lie on one plane and the
+  other motion of that plane is physically valid too, that motion and the plane's homography
+  (``twin_R``, ``twin_t``, ``twin_normal``, ``planar_share``, ``planar_H``:
+  ``affcorr.planar_twin``); attributes ``checksum`` (of the inputs and options,
   for ``resume``), ``worker``, ``seconds``, ``view``, ``peak_rss_mb`` (the worker's peak
   memory so far).
 - ``failures.jsonl``: one line per failed pair (names, error), appended.
 - ``database.db`` (optional, pycolmap): cameras, images, keypoints (+0.5: COLMAP's pixel
-  corners), matches and verified two-view geometries (F, E or H with their inlier matches).
+  corners), matches and verified two-view geometries (F, E or H with their inlier matches;
+  a pose with a planar twin is ``PLANAR_OR_PANORAMIC`` with E, F and the plane's H, as
+  COLMAP's own verification marks a calibrated pair whose inliers a homography explains).
 
 The HDF5 files are opened, written and closed for every group of results, so that between
 writes they are complete files: a crash of a worker costs nothing written, a crash of the
@@ -244,7 +249,9 @@ class ColmapWriter:
     def _geometry(self, r: dict[str, Any], matches: np.ndarray) -> Any:
         """The verified geometry: the relative pose (CALIBRATED, E) when estimated, else F
         (UNCALIBRATED), else H (PLANAR); the inlier matches are the keypoint matches whose
-        AC is an inlier of that model."""
+        AC is an inlier of that model. A pose with a planar twin (its motion is ambiguous) is
+        PLANAR_OR_PANORAMIC with the plane's H, as COLMAP's own verification marks a
+        calibrated pair whose inliers a homography explains."""
         pc = self.pycolmap
         models = r["models"]
         ack = np.asarray(r["ac_keypoints"])
@@ -273,6 +280,9 @@ class ColmapWriter:
                 tvg.H = models["H"]
             if "H" in models and np.isfinite(models["H"]).all():
                 tvg.H = models["H"]
+            if key == "E" and "planar_H" in models:
+                tvg.config = pc.TwoViewGeometryConfiguration.PLANAR_OR_PANORAMIC
+                tvg.H = models["planar_H"]
             tvg.inlier_matches = np.asarray(sorted(pairs), dtype=np.uint32).reshape(-1, 2)
             return tvg
         tvg.config = pc.TwoViewGeometryConfiguration.UNDEFINED

@@ -209,8 +209,9 @@ def _pair_arrays(m: Any, f0: Any, f1: Any, snap_px: float) -> dict[str, Any]:
 
 
 def _models(corrs: Any, certainty: Any, task: dict[str, Any], config: dict[str, Any]) -> dict:
-    """H, F and the relative pose with their inlier masks over the ACs; a model that cannot
-    be estimated (too few ACs, no consensus) is NaN with no inliers."""
+    """H, F and the relative pose with their inlier masks over the ACs, and the pose's planar
+    twin when it has one; a model that cannot be estimated (too few ACs, no consensus) is NaN
+    with no inliers."""
     import affcorr
 
     out: dict[str, Any] = {}
@@ -230,6 +231,11 @@ def _models(corrs: Any, certainty: Any, task: dict[str, Any], config: dict[str, 
                 pose, info = affcorr.estimate_relative_pose(corrs, k0, k1, threshold=thr, seed=seed)
                 out.update(R=pose.R, t=pose.t, E=pose.E, pose_F=pose.F)
                 out["pose_inliers"] = np.asarray(info.inliers)
+                # One plane: the other motion that explains every AC as well (see planar_twin).
+                twin = affcorr.planar_twin(corrs, k0, k1, pose, info.inliers)
+                if twin is not None:
+                    out.update(twin_R=twin.R, twin_t=twin.t, twin_normal=twin.normal)
+                    out.update(planar_share=np.float64(twin.planar_share), planar_H=twin.H)
         except ValueError:
             # Fewer ACs than a minimal sample: no model, as the pipeline reports it.
             key = {"homography": "H", "fundamental": "F"}.get(g, "E")
