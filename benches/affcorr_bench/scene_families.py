@@ -655,6 +655,7 @@ def real_pairs(args) -> int:
                     flag is not None and e >= 10 and max(pose_errors(flag.R, flag.t, scene)) < 10
                 )
         print(p.dataset, p.name, len(c), flush=True)
+    h_lines = real_homographies(pipe)
     sets = sorted({k[0] for k in errs}, key=lambda d: (d == "all", d))
     lines = [
         "# Real pairs: the default against points on the same matches (issue 22)",
@@ -724,7 +725,7 @@ def real_pairs(args) -> int:
                 for name, m in modulo.items()
             ],
         )
-    lines += real_homographies(pipe)
+    lines += h_lines
     common.write_report(args.out.with_name(args.out.name + ".real.md"), lines + [""])
     return 0
 
