@@ -86,8 +86,8 @@ pub(crate) struct AffineSums {
 }
 
 impl AffineSums {
-    /// Adds the four residuals d of one AC (A_H(x1) − A at `h`, row-major) with weights
-    /// `weight(k, d)`; returns the sum of the costs that `weight` gives with them.
+    /// Adds the four residuals d of one AC (A_H(x1) − A at `h`, row-major), each with the
+    /// (cost, weight ω) that `weight(d)` gives; returns the sum of the costs.
     #[inline]
     pub(crate) fn add_ac(
         &mut self,
@@ -119,26 +119,18 @@ impl AffineSums {
                 let (rho, omega) = weight(d);
                 cost += rho;
                 let (wu, wd) = ([omega * u[0], omega * u[1], omega * u[2]], omega * d);
-                let diag = &mut self.diag[r];
-                diag[0] += wu[0] * u[0];
-                diag[1] += wu[0] * u[1];
-                diag[2] += wu[0] * u[2];
-                diag[3] += wu[1] * u[1];
-                diag[4] += wu[1] * u[2];
-                diag[5] += wu[2] * u[2];
+                add_upper_outer(&mut self.diag[r], &wu, &u);
                 for (i, wui) in wu.iter().enumerate() {
                     for (j, vj) in v.iter().enumerate() {
                         self.cross[r][3 * i + j] += wui * vj;
                     }
                     self.g_rows[r][i] += wd * u[i];
                 }
-                let wv = [omega * v[0], omega * v[1], omega * v[2]];
-                self.last[0] += wv[0] * v[0];
-                self.last[1] += wv[0] * v[1];
-                self.last[2] += wv[0] * v[2];
-                self.last[3] += wv[1] * v[1];
-                self.last[4] += wv[1] * v[2];
-                self.last[5] += wv[2] * v[2];
+                add_upper_outer(
+                    &mut self.last,
+                    &[omega * v[0], omega * v[1], omega * v[2]],
+                    &v,
+                );
                 for (g, vk) in self.g_last.iter_mut().zip(v) {
                     *g += wd * vk;
                 }
@@ -177,6 +169,17 @@ impl AffineSums {
         sums.g_sum[6..].copy_from_slice(&self.g_last);
         sums
     }
+}
+
+/// Adds the upper triangle (00, 01, 02, 11, 12, 22) of (ω x) xᵀ to `acc`, given `wx` = ω x.
+#[inline(always)]
+fn add_upper_outer(acc: &mut [f64; 6], wx: &[f64; 3], x: &[f64; 3]) {
+    acc[0] += wx[0] * x[0];
+    acc[1] += wx[0] * x[1];
+    acc[2] += wx[0] * x[2];
+    acc[3] += wx[1] * x[1];
+    acc[4] += wx[1] * x[2];
+    acc[5] += wx[2] * x[2];
 }
 
 /// The affine part of a homography refinement.
