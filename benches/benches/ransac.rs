@@ -22,8 +22,7 @@ fn data(planes: usize, seed: u64) -> (PlaneScene, Correspondences) {
         affine_noise: 0.02,
     };
     let (acs, _) = noisy_correspondences(&mut rng, &scene, 2000, &noise);
-    let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
-    (scene, Correspondences::from_ac_rows(&rows).expect("finite"))
+    (scene, Correspondences::from_acs(&acs).expect("finite"))
 }
 
 fn options(threshold: f64, sample: SampleKind) -> EstimatorOptions {

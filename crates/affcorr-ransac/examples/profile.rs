@@ -84,8 +84,7 @@ fn main() {
             affine_noise: 0.02,
         };
         let (acs, truth) = noisy_correspondences(&mut rng, &scene, 2000, &noise);
-        let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
-        let data = Correspondences::from_ac_rows(&rows).expect("finite");
+        let data = Correspondences::from_acs(&acs).expect("finite");
         let start = std::time::Instant::now();
         let (mask, it, l, r) = match problem {
             "homography" => {

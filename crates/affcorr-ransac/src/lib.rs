@@ -37,11 +37,10 @@
 //! let scene = PlaneScene::random(&mut rng);
 //! let noise = NoiseModel { planes: 3, outlier_ratio: 0.3, pixel_noise: 0.5, affine_noise: 0.01 };
 //! let (acs, truth) = noisy_correspondences(&mut rng, &scene, 300, &noise);
-//! let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
 //!
 //! let mut opts = EstimatorOptions::default();
 //! opts.ransac.threshold = 1.0; // pixels
-//! let data = Correspondences::from_ac_rows(&rows)?;
+//! let data = Correspondences::from_acs(&acs)?;
 //! let est = estimate_relative_pose(&data, &scene.k1, &scene.k2, &opts)?;
 //!
 //! let r_err = ((est.model.pose.r.transpose() * scene.pose.r).trace() - 1.0) / 2.0;

@@ -147,8 +147,7 @@ mod tests {
             affine_noise: 0.01,
         };
         let (acs, _) = noisy_correspondences(&mut rng, &scene, 300, &noise);
-        let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
-        (scene, Correspondences::from_ac_rows(&rows).unwrap())
+        (scene, Correspondences::from_acs(&acs).unwrap())
     }
 
     fn angle(a: &Pose, b: &Pose) -> f64 {

@@ -22,8 +22,7 @@ fn pose_errors(noise: &NoiseModel, seeds: u64, opts: &EstimatorOptions) -> (f64,
         let mut rng = Pcg64::seed_from_u64(100 + seed);
         let scene = PlaneScene::random(&mut rng);
         let (acs, _) = noisy_correspondences(&mut rng, &scene, 300, noise);
-        let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
-        let data = Correspondences::from_ac_rows(&rows).unwrap();
+        let data = Correspondences::from_acs(&acs).unwrap();
         let est = estimate_relative_pose(&data, &scene.k1, &scene.k2, opts).unwrap();
         let p = est.model.pose;
         rot.push(angle_deg(&(p.r.transpose() * scene.pose.r)));
@@ -122,8 +121,7 @@ fn accurate_acs_make_the_fundamental_matrix_more_accurate() {
             },
         )
         .0;
-        let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
-        let data = Correspondences::from_ac_rows(&rows).unwrap();
+        let data = Correspondences::from_acs(&acs).unwrap();
         for (k, a) in [AffineRefinement::Off, AffineRefinement::All]
             .into_iter()
             .enumerate()
@@ -163,8 +161,7 @@ fn accurate_acs_make_the_homography_more_accurate_than_points() {
         let mut rng = Pcg64::seed_from_u64(300 + seed);
         let scene = PlaneScene::random(&mut rng);
         let (acs, _) = noisy_correspondences(&mut rng, &scene, 300, &noise);
-        let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
-        let data = Correspondences::from_ac_rows(&rows).unwrap();
+        let data = Correspondences::from_acs(&acs).unwrap();
         let mut opts = EstimatorOptions::default();
         opts.ransac.threshold = 2.0;
         let mut errors = [0.0; 2];
@@ -206,11 +203,10 @@ fn zero_confidence_everywhere_is_the_points_only_fit() {
         affine_noise: 0.01,
     };
     let (acs, _) = noisy_correspondences(&mut rng, &scene, 300, &noise);
-    let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
-    let data = Correspondences::from_ac_rows(&rows).unwrap();
+    let data = Correspondences::from_acs(&acs).unwrap();
     let off = options(AffineRefinement::Off, ScoringKind::Msac);
     let mut zero = options(AffineRefinement::All, ScoringKind::Msac);
-    zero.affine_confidence = Some(vec![0.0; rows.len()]);
+    zero.affine_confidence = Some(vec![0.0; acs.len()]);
     let a = estimate_relative_pose(&data, &scene.k1, &scene.k2, &off).unwrap();
     let b = estimate_relative_pose(&data, &scene.k1, &scene.k2, &zero).unwrap();
     assert_eq!(a.model, b.model);
@@ -218,7 +214,7 @@ fn zero_confidence_everywhere_is_the_points_only_fit() {
     // Full confidence is the default, and a half confidence changes the fit.
     let mut one = options(AffineRefinement::All, ScoringKind::Msac);
     let all = estimate_relative_pose(&data, &scene.k1, &scene.k2, &one).unwrap();
-    one.affine_confidence = Some(vec![1.0; rows.len()]);
+    one.affine_confidence = Some(vec![1.0; acs.len()]);
     let ones = estimate_relative_pose(&data, &scene.k1, &scene.k2, &one).unwrap();
     assert_eq!(all.model, ones.model);
     assert_ne!(all.model, a.model);
@@ -235,10 +231,8 @@ fn bad_confidences_are_typed_errors_naming_the_option() {
         affine_noise: 0.01,
     };
     let (acs, _) = noisy_correspondences(&mut rng, &scene, 50, &noise);
-    let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
-    let data = Correspondences::from_ac_rows(&rows).unwrap();
-    let points: Vec<[f64; 4]> = rows.iter().map(|r| [r[0], r[1], r[2], r[3]]).collect();
-    let point_data = Correspondences::from_point_rows(&points).unwrap();
+    let data = Correspondences::from_acs(&acs).unwrap();
+    let point_data = data.points_only();
     let cases: [(Vec<f64>, &Correspondences, &str); 5] = [
         (vec![1.0; 49], &data, "one value per correspondence"),
         (vec![1.5; 50], &data, "[0, 1]"),
@@ -284,10 +278,8 @@ fn the_defaults_use_the_affine_terms_on_acs_only() {
         affine_noise: 0.02,
     };
     let (acs, _) = noisy_correspondences(&mut rng, &scene, 300, &noise);
-    let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
-    let data = Correspondences::from_ac_rows(&rows).unwrap();
-    let points: Vec<[f64; 4]> = rows.iter().map(|r| [r[0], r[1], r[2], r[3]]).collect();
-    let point_data = Correspondences::from_point_rows(&points).unwrap();
+    let data = Correspondences::from_acs(&acs).unwrap();
+    let point_data = data.points_only();
     let (k1, k2) = (&scene.k1, &scene.k2);
     let mut off = EstimatorOptions {
         affine_weight: Some(0.0),

@@ -41,7 +41,6 @@ fn scene(kind: Kind, seed: u64, n: usize, outlier_ratio: f64) -> Scene {
         affine_noise: 0.02,
     };
     let (acs, is_inlier) = noisy_correspondences(&mut rng, &scene, n, &noise);
-    let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
     let mut check = Vec::new();
     for _ in 0..4 {
         let mut s = scene;
@@ -51,7 +50,7 @@ fn scene(kind: Kind, seed: u64, n: usize, outlier_ratio: f64) -> Scene {
     }
     Scene {
         scene,
-        data: Correspondences::from_ac_rows(&rows).unwrap(),
+        data: Correspondences::from_acs(&acs).unwrap(),
         is_inlier,
         check,
     }

@@ -6,7 +6,7 @@
 
 use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
 use affcorr_ransac::{
-    Correspondences, EstimatorOptions, LoKind, RansacOptions, SampleKind, SamplerKind,
+    Correspondences, EstimatorOptions, LoKind, RansacError, RansacOptions, SampleKind, SamplerKind,
     estimate_fundamental, estimate_homography, estimate_relative_pose,
 };
 use rand::SeedableRng;
@@ -37,9 +37,8 @@ fn make_data(
         affine_noise,
     };
     let (acs, is_inlier) = noisy_correspondences(rng, scene, n, &noise);
-    let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
     Noisy {
-        data: Correspondences::from_ac_rows(&rows).unwrap(),
+        data: Correspondences::from_acs(&acs).unwrap(),
         is_inlier,
     }
 }
@@ -231,6 +230,31 @@ fn prosac_and_batch_and_errors() {
     let points = Correspondences::from_point_rows(&[[0.0; 4]; 10]).unwrap();
     assert!(estimate_homography(&points, &options(1.0, SampleKind::Affine, 0)).is_err());
     assert!(Correspondences::from_ac_rows(&[[f64::NAN; 8]]).is_err());
+}
+
+#[test]
+fn acs_and_their_rows_make_the_same_data_and_the_same_errors() {
+    let mut rng = Pcg64::seed_from_u64(31);
+    let scene = PlaneScene::random(&mut rng);
+    let d = make_data(&mut rng, &scene, 2, 40, 0.3, 0.5, 0.02);
+    let acs: Vec<_> = (0..d.data.len()).map(|i| d.data.ac(i)).collect();
+    let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
+    let (from_acs, from_rows) = (
+        Correspondences::from_acs(&acs).unwrap(),
+        Correspondences::from_ac_rows(&rows).unwrap(),
+    );
+    assert_eq!(
+        (&from_acs.x1, &from_acs.x2, &from_acs.a),
+        (&from_rows.x1, &from_rows.x2, &from_rows.a)
+    );
+    let points = from_acs.points_only();
+    assert!(!points.has_affine() && points.x1 == from_acs.x1 && points.x2 == from_acs.x2);
+    let mut bad = acs;
+    bad[7].a[(1, 0)] = f64::INFINITY;
+    match Correspondences::from_acs(&bad) {
+        Err(RansacError::NonFinite { what, index }) => assert_eq!((what, index), ("corrs", 7)),
+        other => panic!("{other:?}"),
+    }
 }
 
 #[test]

@@ -86,12 +86,11 @@
 //! let scene = PlaneScene::random(&mut rng);
 //! let noise = NoiseModel { planes: 3, outlier_ratio: 0.3, pixel_noise: 0.5, affine_noise: 0.01 };
 //! let (acs, truth) = noisy_correspondences(&mut rng, &scene, 400, &noise);
-//! let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
 //!
 //! let mut opts = EstimatorOptions::default();
 //! opts.ransac.threshold = 1.0;
 //! opts.ransac.seed = 3;
-//! let est = estimate_fundamental(&Correspondences::from_ac_rows(&rows)?, &opts)?;
+//! let est = estimate_fundamental(&Correspondences::from_acs(&acs)?, &opts)?;
 //!
 //! // p2ᵀ F p1 = 0: the true inliers are within a pixel of the estimated F.
 //! let inliers = acs.iter().zip(&truth).filter(|(_, t)| **t).map(|(ac, _)| ac.points());
@@ -113,12 +112,11 @@
 //! let scene = PlaneScene::random(&mut rng);
 //! let noise = NoiseModel { planes: 3, outlier_ratio: 0.3, pixel_noise: 0.5, affine_noise: 0.01 };
 //! let (acs, _) = noisy_correspondences(&mut rng, &scene, 400, &noise);
-//! let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
 //!
 //! // Pixels in, intrinsics alongside; the threshold is in pixels.
 //! let mut opts = EstimatorOptions::default();
 //! opts.ransac.threshold = 1.0;
-//! let data = Correspondences::from_ac_rows(&rows)?;
+//! let data = Correspondences::from_acs(&acs)?;
 //! let est = estimate_relative_pose(&data, &scene.k1, &scene.k2, &opts)?;
 //!
 //! // X2 = R X1 + t with |t| = 1: rotation error in degrees, translation direction error.

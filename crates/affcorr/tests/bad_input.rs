@@ -373,13 +373,7 @@ fn estimators_reject_bad_data_and_options_with_typed_errors() {
     message(estimate_homography(&data, &o), &["quality", "finite"]);
     let mut o = opts();
     o.sample = Some(SampleKind::Affine);
-    let pts = Correspondences::from_point_rows(
-        &rows
-            .iter()
-            .map(|r| [r[0], r[1], r[2], r[3]])
-            .collect::<Vec<_>>(),
-    )
-    .unwrap();
+    let pts = Correspondences::from_ac_rows(&rows).unwrap().points_only();
     message(estimate_homography(&pts, &o), &["sample", "(N, 8)"]);
 
     // A per-pair option list of the wrong length fails every pair.

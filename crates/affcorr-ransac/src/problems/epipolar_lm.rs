@@ -446,10 +446,9 @@ mod tests {
             affine_noise: rel,
         };
         let (acs, _) = noisy_correspondences(&mut rng, &scene, n, &noise);
-        let rows: Vec<_> = acs.iter().map(|ac| ac.to_row()).collect();
         (
             scene.fundamental().normalize(),
-            Correspondences::from_ac_rows(&rows).unwrap(),
+            Correspondences::from_acs(&acs).unwrap(),
         )
     }
 
@@ -516,10 +515,7 @@ mod tests {
         let mut conf = vec![0.0; 600];
         conf[..4].fill(1.0);
         assert!(affine_scale(&data, &f, &idx, Some(&conf)).is_none());
-        let points = Correspondences {
-            a: Vec::new(),
-            ..data
-        };
+        let points = data.points_only();
         assert!(affine_scale(&points, &f, &idx, None).is_none());
     }
 }

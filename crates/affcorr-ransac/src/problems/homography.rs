@@ -412,8 +412,7 @@ mod tests {
             affine_noise: 0.0,
         };
         let (acs, _) = noisy_correspondences(&mut rng, &scene, 40, &noise);
-        let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
-        let data = Correspondences::from_ac_rows(&rows).unwrap();
+        let data = Correspondences::from_acs(&acs).unwrap();
         let problem = HomographyProblem::new(&data, SampleKind::Points, 0.0);
         let h = scene.homography() / scene.homography().norm();
         let idx: Vec<usize> = (0..40).collect();
@@ -476,8 +475,7 @@ mod tests {
             affine_noise: 0.0,
         };
         let (acs, _) = noisy_correspondences(&mut rng, &scene, 200, &noise);
-        let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
-        let data = Correspondences::from_ac_rows(&rows).unwrap();
+        let data = Correspondences::from_acs(&acs).unwrap();
         let problem = HomographyProblem::new(&data, SampleKind::Points, 0.0);
         let all: Vec<usize> = (0..200).collect();
         // A rough start: the linear fit on 6 points. (On all 200 the linear fit is already

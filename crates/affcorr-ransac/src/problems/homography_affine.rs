@@ -326,8 +326,7 @@ mod tests {
             affine_noise: rel,
         };
         let (acs, _) = noisy_correspondences(&mut rng, &scene, n, &noise);
-        let rows: Vec<[f64; 8]> = acs.iter().map(|a| a.to_row()).collect();
-        (scene, Correspondences::from_ac_rows(&rows).unwrap())
+        (scene, Correspondences::from_acs(&acs).unwrap())
     }
 
     #[test]

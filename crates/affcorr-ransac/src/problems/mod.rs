@@ -63,6 +63,18 @@ impl Correspondences {
         })
     }
 
+    /// From ACs (the synthetic generators' and the solvers' type); a non-finite AC is an error
+    /// naming its index, as for [`Self::from_ac_rows`].
+    pub fn from_acs(acs: &[AffineCorrespondence]) -> Result<Self> {
+        let data = Self {
+            x1: acs.iter().map(|ac| ac.x1).collect(),
+            x2: acs.iter().map(|ac| ac.x2).collect(),
+            a: acs.iter().map(|ac| ac.a).collect(),
+        };
+        data.validate()?;
+        Ok(data)
+    }
+
     /// From `(N, 4)` point rows.
     pub fn from_point_rows(rows: &[PointRow]) -> Result<Self> {
         check_finite(rows)?;
@@ -71,6 +83,15 @@ impl Correspondences {
             x2: rows.iter().map(|r| Vec2::new(r[2], r[3])).collect(),
             a: Vec::new(),
         })
+    }
+
+    /// The same points without their affine maps: what an estimator sees of point matches.
+    pub fn points_only(&self) -> Self {
+        Self {
+            x1: self.x1.clone(),
+            x2: self.x2.clone(),
+            a: Vec::new(),
+        }
     }
 
     /// Checks what [`Self::from_ac_rows`] guarantees, for data built from the public fields:
