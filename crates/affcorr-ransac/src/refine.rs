@@ -23,8 +23,11 @@ pub trait LeastSquares {
     fn dof(&self) -> usize;
     /// Σ ρ(rᵢ²) over `indices`.
     fn cost(&self, model: &Self::Model, indices: &[usize], loss: &Loss) -> f64;
-    /// Adds JᵀWJ and JᵀWr over `indices` at `model` (W = ρ′(r²)) and returns the cost.
-    fn normal_equations(
+    /// Adds JᵀWJ and JᵀWr over `indices` at `model` (W = ρ′(r²)) and returns the cost. With
+    /// `COST` false the caller knows the cost at `model` already ([`levenberg_marquardt`] after
+    /// an accepted step, whose cost it has just evaluated) and a kernel may skip the loss's
+    /// value and return 0: the Cauchy loss's logarithm costs more than its weight.
+    fn normal_equations<const COST: bool>(
         &self,
         model: &Self::Model,
         indices: &[usize],
@@ -88,13 +91,14 @@ pub fn levenberg_marquardt<P: LeastSquares>(
     let mut model = model.clone();
     let mut lambda = 1e-3;
     let (mut jtj, mut jtr) = (Mat9::zeros(), Vec9::zeros());
-    let mut cost = problem.normal_equations(&model, indices, loss, &mut jtj, &mut jtr);
+    let mut cost = problem.normal_equations::<true>(&model, indices, loss, &mut jtj, &mut jtr);
     let mut fresh = true;
     for _ in 0..options.max_iterations {
         if !fresh {
+            // After an accepted step: `cost` is the cost at `model` already.
             jtj.fill(0.0);
             jtr.fill(0.0);
-            cost = problem.normal_equations(&model, indices, loss, &mut jtj, &mut jtr);
+            problem.normal_equations::<false>(&model, indices, loss, &mut jtj, &mut jtr);
         }
         let mut damped = jtj;
         for k in 0..d {
@@ -163,7 +167,7 @@ mod tests {
                 .map(|&i| loss.cost((self.y[i] - (m.0 * self.x[i]).exp() - m.1).powi(2)))
                 .sum()
         }
-        fn normal_equations(
+        fn normal_equations<const COST: bool>(
             &self,
             m: &(f64, f64),
             idx: &[usize],
@@ -240,7 +244,7 @@ mod tests {
         fn cost(&self, m: &(f64, f64), idx: &[usize], loss: &Loss) -> f64 {
             self.0.cost(m, idx, loss)
         }
-        fn normal_equations(
+        fn normal_equations<const COST: bool>(
             &self,
             m: &(f64, f64),
             idx: &[usize],
@@ -249,7 +253,7 @@ mod tests {
             jtr: &mut Vec9,
         ) -> f64 {
             self.1.set(self.1.get() + 1);
-            self.0.normal_equations(m, idx, loss, jtj, jtr)
+            self.0.normal_equations::<COST>(m, idx, loss, jtj, jtr)
         }
         fn retract(&self, m: &(f64, f64), d: &Vec9) -> (f64, f64) {
             self.0.retract(m, d)

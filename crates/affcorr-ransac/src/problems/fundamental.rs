@@ -407,7 +407,7 @@ impl LeastSquares for FundamentalFit<'_, '_> {
                 .map_or(0.0, |t| epipolar_lm::affine_cost(data, &f, indices, t))
     }
 
-    fn normal_equations(
+    fn normal_equations<const COST: bool>(
         &self,
         m: &RankTwo,
         indices: &[usize],

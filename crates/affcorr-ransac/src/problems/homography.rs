@@ -222,9 +222,9 @@ impl Problem for HomographyProblem<'_> {
 impl HomographyProblem<'_> {
     /// The sums of [`LeastSquares::normal_equations`] over blocks: gather, [`transfer`] lane by
     /// lane, the loss per datum, then the 33 sums as dot products over the block. Returns the
-    /// cost.
+    /// cost if `COST`, else 0.
     #[inline(always)]
-    fn accumulate(
+    fn accumulate<const COST: bool>(
         &self,
         h: &Mat3,
         indices: &[usize],
@@ -250,9 +250,13 @@ impl HomographyProblem<'_> {
                 (p[0][j], p[1][j], p[2][j]) = (x1[j].x * inv_w, x1[j].y * inv_w, inv_w);
             }
             for j in 0..len {
-                let c;
-                (c, w[j]) = loss.cost_and_weight(r2[j]);
-                cost += c;
+                if COST {
+                    let c;
+                    (c, w[j]) = loss.cost_and_weight(r2[j]);
+                    cost += c;
+                } else {
+                    w[j] = loss.weight(r2[j]);
+                }
             }
             // The tail of a short last block (stale but finite values) must not count.
             w[len..].fill(0.0);
@@ -312,7 +316,7 @@ impl LeastSquares for HomographyProblem<'_> {
             .sum()
     }
 
-    fn normal_equations(
+    fn normal_equations<const COST: bool>(
         &self,
         h: &Mat3,
         indices: &[usize],
@@ -329,7 +333,7 @@ impl LeastSquares for HomographyProblem<'_> {
         let cost = dispatch(
             #[inline(always)]
             || {
-                self.accumulate(
+                self.accumulate::<COST>(
                     h,
                     indices,
                     loss,
@@ -418,7 +422,12 @@ mod tests {
         let idx: Vec<usize> = (0..40).collect();
         let loss = Loss::Cauchy { scale_sq: 4.0 };
         let (mut jtj, mut jtr) = (Mat9::zeros(), Vec9::zeros());
-        problem.normal_equations(&h, &idx, &loss, &mut jtj, &mut jtr);
+        let cost = problem.normal_equations::<true>(&h, &idx, &loss, &mut jtj, &mut jtr);
+        assert!((cost - problem.cost(&h, &idx, &loss)).abs() <= 1e-12 * cost);
+        // Without the cost, the same sums.
+        let (mut jtj_k, mut jtr_k) = (Mat9::zeros(), Vec9::zeros());
+        problem.normal_equations::<false>(&h, &idx, &loss, &mut jtj_k, &mut jtr_k);
+        assert_eq!((jtj, jtr), (jtj_k, jtr_k));
         // Explicit: the 2×9 Jacobian of π(H p1) per datum, weighted, projected on the basis.
         let (mut a, mut g) = (Mat9::zeros(), Vec9::zeros());
         for &i in &idx {
@@ -450,7 +459,8 @@ mod tests {
             let (mut s, mut g) = ([[0.0; 6]; 4], [[0.0; 3]; 3]);
             let [s0, s1, s2, s3] = &mut s;
             let [g0, g1, g2] = &mut g;
-            let mut k = || problem.accumulate(&h, &idx, &loss, [s0, s1, s2, s3], [g0, g1, g2]);
+            let mut k =
+                || problem.accumulate::<true>(&h, &idx, &loss, [s0, s1, s2, s3], [g0, g1, g2]);
             let c = if dispatched { dispatch(k) } else { k() };
             (c, s, g)
         };

@@ -19,6 +19,7 @@ use super::Correspondences;
 use super::epipolar_lm::{CHI2_1_MEDIAN, MAX_AFFINE_SCALE};
 use super::homography::HomographyProblem;
 use super::normal_eq::EntrySums;
+use super::simd::{BLOCK, dispatch, dot};
 use crate::loss::Loss;
 use crate::refine::{LeastSquares, Mat9, Vec9};
 use affcorr_geom::{Mat2, Mat3, Vec2};
@@ -26,7 +27,7 @@ use affcorr_geom::{Mat2, Mat3, Vec2};
 /// Most rounds of estimate-λ-then-refine: λ is first estimated at the points-only model.
 pub(crate) const AFFINE_ROUNDS: usize = 3;
 
-/// A_H(x1) − A, the four entries row-major: the residuals of [`AffineSums::add_ac`] without
+/// A_H(x1) − A, the four entries row-major: the residuals of [`AffineSums::add_acs`] without
 /// their gradients (the costs of LM's trial steps and the scale estimate need none).
 #[inline]
 pub(crate) fn affine_residuals(h: &Mat3, x1: &Vec2, a: &Mat2) -> [f64; 4] {
@@ -40,7 +41,7 @@ pub(crate) fn affine_residuals(h: &Mat3, x1: &Vec2, a: &Mat2) -> [f64; 4] {
 }
 
 /// A_H(x1) − A and its dense gradient over the 9 entries of H (row-major), for each of the four
-/// entries of A (row-major): the reference that [`AffineSums::add_ac`] is tested against.
+/// entries of A (row-major): the reference that [`AffineSums::add_acs`] is tested against.
 #[cfg(test)]
 pub(crate) fn affine_residuals_and_gradients(
     h: &Mat3,
@@ -86,53 +87,92 @@ pub(crate) struct AffineSums {
 }
 
 impl AffineSums {
-    /// Adds the four residuals d of one AC (A_H(x1) − A at `h`, row-major), each with the
-    /// (cost, weight ω) that `weight(d)` gives; returns the sum of the costs.
-    #[inline]
-    pub(crate) fn add_ac(
+    /// Adds the four residuals d = A_H(x1) − A (row-major) of each AC of `indices`, each with
+    /// the (cost, weight ω) that `weight(i, d)` gives for AC i; returns the sum of the costs.
+    ///
+    /// The layout of the transfer error's kernel (`simd`): blocks of [`BLOCK`] ACs gathered
+    /// into arrays, residuals and gradients lane by lane (branch-free, vectorised), `weight`
+    /// per residual, then every sum a dot product over the block.
+    #[inline(always)]
+    pub(crate) fn add_acs(
         &mut self,
         h: &Mat3,
-        x1: &Vec2,
-        a: &Mat2,
-        mut weight: impl FnMut(f64) -> (f64, f64),
+        data: &Correspondences,
+        indices: &[usize],
+        mut weight: impl FnMut(usize, f64) -> (f64, f64),
     ) -> f64 {
-        let p = [x1.x, x1.y, 1.0];
-        let inv_w = 1.0 / (h[(2, 0)] * p[0] + h[(2, 1)] * p[1] + h[(2, 2)]);
-        let q = [
-            (h[(0, 0)] * p[0] + h[(0, 1)] * p[1] + h[(0, 2)]) * inv_w,
-            (h[(1, 0)] * p[0] + h[(1, 1)] * p[1] + h[(1, 2)]) * inv_w,
-        ];
-        let pw = [p[0] * inv_w, p[1] * inv_w, inv_w];
         let mut cost = 0.0;
-        for c in 0..2 {
-            let h2c = h[(2, c)] * inv_w;
-            // u_c: ∂A_H,rc/∂h_rk = δ_kc / w − p_k h_2c / w², for either row r.
-            let mut u = [-pw[0] * h2c, -pw[1] * h2c, -pw[2] * h2c];
-            u[c] += inv_w;
-            for r in 0..2 {
-                let a_h = (h[(r, c)] - q[r] * h[(2, c)]) * inv_w;
-                let d = a_h - a[(r, c)];
-                // v_rc: ∂A_H,rc/∂h_2k = −(p_k / w)(A_H,rc − q_r h_2c / w) − q_r δ_kc / w.
-                let s = a_h - q[r] * h2c;
-                let mut v = [-pw[0] * s, -pw[1] * s, -pw[2] * s];
-                v[c] -= q[r] * inv_w;
-                let (rho, omega) = weight(d);
-                cost += rho;
-                let (wu, wd) = ([omega * u[0], omega * u[1], omega * u[2]], omega * d);
-                add_upper_outer(&mut self.diag[r], &wu, &u);
-                for (i, wui) in wu.iter().enumerate() {
-                    for (j, vj) in v.iter().enumerate() {
-                        self.cross[r][3 * i + j] += wui * vj;
+        let (mut x, mut y) = ([0.0; BLOCK], [0.0; BLOCK]);
+        let mut a = [[0.0; BLOCK]; 4];
+        // u[c][k]: ∂A_H,rc/∂h_rk (either row r); v[e][k], d[e], ω[e]: residual e = 2r + c.
+        let mut u = [[[0.0; BLOCK]; 3]; 2];
+        let mut v = [[[0.0; BLOCK]; 3]; 4];
+        let (mut d, mut omega) = ([[0.0; BLOCK]; 4], [[0.0; BLOCK]; 4]);
+        for chunk in indices.chunks(BLOCK) {
+            let len = chunk.len();
+            // The lanes past a short last block repeat its first AC (finite wherever the data
+            // are) and get ω = 0.
+            for j in 0..BLOCK {
+                let i = chunk[if j < len { j } else { 0 }];
+                (x[j], y[j]) = (data.x1[i].x, data.x1[i].y);
+                let m = &data.a[i];
+                (a[0][j], a[1][j], a[2][j], a[3][j]) = (m[(0, 0)], m[(0, 1)], m[(1, 0)], m[(1, 1)]);
+            }
+            for j in 0..BLOCK {
+                let inv_w = 1.0 / (h[(2, 0)] * x[j] + h[(2, 1)] * y[j] + h[(2, 2)]);
+                let p = [x[j] * inv_w, y[j] * inv_w, inv_w];
+                let q = [
+                    h[(0, 0)] * p[0] + h[(0, 1)] * p[1] + h[(0, 2)] * p[2],
+                    h[(1, 0)] * p[0] + h[(1, 1)] * p[1] + h[(1, 2)] * p[2],
+                ];
+                for c in 0..2 {
+                    let h2c = h[(2, c)] * inv_w;
+                    for k in 0..3 {
+                        u[c][k][j] = -p[k] * h2c;
                     }
-                    self.g_rows[r][i] += wd * u[i];
+                    u[c][c][j] += inv_w;
+                    for r in 0..2 {
+                        let e = 2 * r + c;
+                        let a_h = (h[(r, c)] - q[r] * h[(2, c)]) * inv_w;
+                        d[e][j] = a_h - a[e][j];
+                        let s = a_h - q[r] * h2c;
+                        for k in 0..3 {
+                            v[e][k][j] = -p[k] * s;
+                        }
+                        v[e][c][j] -= q[r] * inv_w;
+                    }
                 }
-                add_upper_outer(
-                    &mut self.last,
-                    &[omega * v[0], omega * v[1], omega * v[2]],
-                    &v,
-                );
-                for (g, vk) in self.g_last.iter_mut().zip(v) {
-                    *g += wd * vk;
+            }
+            for (j, &i) in chunk.iter().enumerate() {
+                for e in 0..4 {
+                    let rho;
+                    (rho, omega[e][j]) = weight(i, d[e][j]);
+                    cost += rho;
+                }
+            }
+            for om in &mut omega {
+                om[len..].fill(0.0);
+            }
+            for e in 0..4 {
+                let (r, c) = (e / 2, e % 2);
+                let (u, v, om) = (&u[c], &v[e], &omega[e]);
+                let (mut wu, mut wv, mut wd) = ([[0.0; BLOCK]; 3], [[0.0; BLOCK]; 3], [0.0; BLOCK]);
+                for j in 0..BLOCK {
+                    for k in 0..3 {
+                        (wu[k][j], wv[k][j]) = (om[j] * u[k][j], om[j] * v[k][j]);
+                    }
+                    wd[j] = om[j] * d[e][j];
+                }
+                for (t, &(k, l)) in UPPER.iter().enumerate() {
+                    self.diag[r][t] += dot(&wu[k], &u[l]);
+                    self.last[t] += dot(&wv[k], &v[l]);
+                }
+                for k in 0..3 {
+                    for l in 0..3 {
+                        self.cross[r][3 * k + l] += dot(&wu[k], &v[l]);
+                    }
+                    self.g_rows[r][k] += dot(&wd, &u[k]);
+                    self.g_last[k] += dot(&wd, &v[k]);
                 }
             }
         }
@@ -142,8 +182,7 @@ impl AffineSums {
     /// The same sums as [`EntrySums`] (zeros where the structure has none).
     pub(crate) fn entry_sums(&self) -> EntrySums {
         let mut full = [[0.0; 9]; 9];
-        let tri = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
-        for (k, &(i, j)) in tri.iter().enumerate() {
+        for (k, &(i, j)) in UPPER.iter().enumerate() {
             for r in 0..2 {
                 full[3 * r + i][3 * r + j] = self.diag[r][k];
             }
@@ -171,16 +210,8 @@ impl AffineSums {
     }
 }
 
-/// Adds the upper triangle (00, 01, 02, 11, 12, 22) of (ω x) xᵀ to `acc`, given `wx` = ω x.
-#[inline(always)]
-fn add_upper_outer(acc: &mut [f64; 6], wx: &[f64; 3], x: &[f64; 3]) {
-    acc[0] += wx[0] * x[0];
-    acc[1] += wx[0] * x[1];
-    acc[2] += wx[0] * x[2];
-    acc[3] += wx[1] * x[1];
-    acc[4] += wx[1] * x[2];
-    acc[5] += wx[2] * x[2];
-}
+/// The upper triangle of a symmetric 3×3 matrix, in [`AffineSums`]'s order.
+const UPPER: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
 
 /// The affine part of a homography refinement.
 #[derive(Debug, Clone, Copy)]
@@ -204,7 +235,10 @@ pub(crate) fn affine_terms<'c>(
     if !data.has_affine() {
         return None;
     }
-    let (mut pts, mut aff) = (Vec::new(), Vec::new());
+    let (mut pts, mut aff) = (
+        Vec::with_capacity(2 * inliers.len()),
+        Vec::with_capacity(4 * inliers.len()),
+    );
     for &i in inliers {
         if confidence.is_some_and(|c| c[i] <= 0.0) {
             continue;
@@ -275,7 +309,7 @@ impl LeastSquares for HomographyAffineFit<'_, '_> {
         cost
     }
 
-    fn normal_equations(
+    fn normal_equations<const COST: bool>(
         &self,
         h: &Mat3,
         indices: &[usize],
@@ -283,19 +317,26 @@ impl LeastSquares for HomographyAffineFit<'_, '_> {
         jtj: &mut Mat9,
         jtr: &mut Vec9,
     ) -> f64 {
-        let mut cost = self.problem.normal_equations(h, indices, loss, jtj, jtr);
+        let mut cost = self
+            .problem
+            .normal_equations::<COST>(h, indices, loss, jtj, jtr);
         let mut sums = AffineSums::default();
         let (lambda, affine_loss) = (self.terms.lambda, &self.terms.loss);
-        for &i in indices {
-            let c = self.confidence(i);
-            if c <= 0.0 {
-                continue;
-            }
-            cost += sums.add_ac(h, &self.data.x1[i], &self.data.a[i], |d| {
-                let (rho, w) = affine_loss.cost_and_weight(lambda * d * d);
-                (c * rho, c * w * lambda)
-            });
-        }
+        // A confidence of 0 gives the AC no cost and no weight.
+        cost += dispatch(
+            #[inline(always)]
+            || {
+                sums.add_acs(h, self.data, indices, |i, d| {
+                    let (c, s) = (self.confidence(i), lambda * d * d);
+                    if COST {
+                        let (rho, w) = affine_loss.cost_and_weight(s);
+                        (c * rho, c * w * lambda)
+                    } else {
+                        (0.0, c * affine_loss.weight(s) * lambda)
+                    }
+                })
+            },
+        );
         sums.entry_sums()
             .project(&super::homography::tangent_basis(h), jtj, jtr);
         cost
@@ -312,6 +353,7 @@ mod tests {
     use crate::problem::Problem;
     use crate::problems::SampleKind;
     use crate::refine::LmOptions;
+    use affcorr_geom::AffineCorrespondence;
     use affcorr_geom::homography::ac_from_homography;
     use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
     use rand::SeedableRng;
@@ -343,8 +385,12 @@ mod tests {
         };
         let loss = Loss::Cauchy { scale_sq: 4.0 };
         let (mut jtj, mut jtr) = (Mat9::zeros(), Vec9::zeros());
-        let cost = fit.normal_equations(&h, &idx, &loss, &mut jtj, &mut jtr);
+        let cost = fit.normal_equations::<true>(&h, &idx, &loss, &mut jtj, &mut jtr);
         assert!((cost - fit.cost(&h, &idx, &loss)).abs() < 1e-9 * cost);
+        // Without the cost, the same sums.
+        let (mut jtj_k, mut jtr_k) = (Mat9::zeros(), Vec9::zeros());
+        fit.normal_equations::<false>(&h, &idx, &loss, &mut jtj_k, &mut jtr_k);
+        assert_eq!((jtj, jtr), (jtj_k, jtr_k));
         for k in 0..8 {
             let t = 1e-11;
             let step = |s: f64| {
@@ -412,15 +458,26 @@ mod tests {
     #[test]
     fn structured_sums_equal_the_dense_ones() {
         let h = Mat3::new(0.9, -0.2, 30.0, 0.15, 1.1, -12.0, 4e-4, -2e-4, 1.0);
+        // Two full blocks and a short one, in a shuffled order with one AC left out.
+        let acs: Vec<_> = (0..2 * BLOCK + 7)
+            .map(|k| {
+                let k = k as f64;
+                AffineCorrespondence {
+                    x1: Vec2::new(37.0 * k % 640.0, 300.0 - 41.0 * k % 480.0),
+                    x2: Vec2::zeros(),
+                    a: Mat2::new(1.0 + 0.01 * k, -0.2, 0.1, 0.9 - 0.02 * k),
+                }
+            })
+            .collect();
+        let data = Correspondences::from_acs(&acs).unwrap();
+        let indices: Vec<usize> = (1..acs.len()).rev().collect();
+        let weight = |i: usize, d: f64| (0.3 * d * d, 0.7 + d.abs() + 0.01 * i as f64);
         let (mut structured, mut dense) = (AffineSums::default(), EntrySums::new());
-        let (mut cost_s, mut cost_d) = (0.0, 0.0);
-        let weight = |d: f64| (0.3 * d * d, 0.7 + d.abs());
-        for k in 0..7 {
-            let x1 = Vec2::new(37.0 * k as f64, 300.0 - 41.0 * k as f64);
-            let a = Mat2::new(1.0 + 0.01 * k as f64, -0.2, 0.1, 0.9 - 0.02 * k as f64);
-            cost_s += structured.add_ac(&h, &x1, &a, weight);
-            for (d, grad) in affine_residuals_and_gradients(&h, &x1, &a) {
-                let (rho, w) = weight(d);
+        let cost_s = structured.add_acs(&h, &data, &indices, weight);
+        let mut cost_d = 0.0;
+        for &i in &indices {
+            for (d, grad) in affine_residuals_and_gradients(&h, &data.x1[i], &data.a[i]) {
+                let (rho, w) = weight(i, d);
                 cost_d += rho;
                 dense.add(&grad, w, d);
             }

@@ -313,7 +313,7 @@ impl LeastSquares for PoseFit<'_, '_> {
             })
     }
 
-    fn normal_equations(
+    fn normal_equations<const COST: bool>(
         &self,
         m: &PoseModel,
         indices: &[usize],
