@@ -209,7 +209,7 @@ fn read_gray_image<'py>(py: Python<'py>, image: &Bound<'py, PyAny>) -> PyResult<
 #[pyo3(name = "refine_affine")]
 #[pyo3(signature = (
     image_a, image_b, corrs, *, radius, blur_sigmas, iterations, min_zncc, move_points, try_identity,
-    max_shift_std
+    try_neighbours, max_shift_std
 ))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn refine_affine_py<'py>(
@@ -223,6 +223,7 @@ fn refine_affine_py<'py>(
     min_zncc: f64,
     move_points: bool,
     try_identity: bool,
+    try_neighbours: bool,
     max_shift_std: f64,
 ) -> PyResult<(F64<'py>, Bound<'py, PyDict>)> {
     let rows = F64Array::extract(corrs, "corrs")?
@@ -238,6 +239,7 @@ fn refine_affine_py<'py>(
         min_zncc,
         move_points,
         try_identity,
+        try_neighbours,
         max_shift_std,
     };
     let r =

@@ -321,6 +321,7 @@ def refine_affine(
     min_zncc: float,
     move_points: bool,
     try_identity: bool,
+    try_neighbours: bool,
     max_shift_std: float,
 ) -> tuple[NDArray[np.float64], dict[str, Any]]:
     """Affine Lucas-Kanade refinement of ACs (wrapped by affcorr.refine_affine): (corrs (N, 8),

@@ -386,6 +386,7 @@ def refine_affine(
     min_zncc: float = 0.8,
     move_points: bool = True,
     try_identity: bool = True,
+    try_neighbours: bool = True,
     max_shift_std: float = 0.5,
     channel_order: str = "rgb",
 ) -> AffineRefinement:
@@ -403,8 +404,12 @@ def refine_affine(
     ``affine_confidence`` (never ``reliable``). With ``move_points`` x2 becomes
     ``x2 + t`` (A and t are fitted together); otherwise only A changes. With ``try_identity``
     the iterations start from A = I instead of the input's A wherever the identity matches
-    better at the coarsest level (most image pairs are roughly upright). ``channel_order``:
-    ``"bgr"`` for ``cv2.imread`` arrays.
+    better at the coarsest level (most image pairs are roughly upright). With
+    ``try_neighbours`` they start, where it matches better still, from the similarity that the
+    AC's 8 nearest ACs (in image A) agree on: the median scale ratio and rotation of their
+    displacements ``x2_j - x2_i`` against ``x1_j - x1_i``. The shape network's scale is poor
+    beyond about 1.5x zoom; the points' displacements know it. ``channel_order``: ``"bgr"``
+    for ``cv2.imread`` arrays.
 
     On graffiti 1->3 at SIFT's correct matches the median ||A - A_gt||_F goes from 0.369 (the
     shape network) to 0.023, against SIFT's own 0.311 (benches/results/shape_accuracy.md).
@@ -438,6 +443,7 @@ def refine_affine(
         move_points=bool(move_points),
         max_shift_std=float(max_shift_std),
         try_identity=bool(try_identity),
+        try_neighbours=bool(try_neighbours),
     )
     return AffineRefinement(
         out,

@@ -445,22 +445,24 @@ def _pipeline(max_keypoints: int):
 
 #: Bump when the view cascade changes what it returns, so cached affcorr ACs are recomputed.
 VIEWS_REVISION = 2
+LK_REVISION = 2
 
 
 @functools.cache
 def shape_model_tag() -> str:
     """The bundled shape network's identity (a hash of the ONNX file), the refinement ("-lk":
-    affcorr's default affine Lucas-Kanade, which moves x2 too) and the pipeline's view cascade
-    ("-views-auto"): part of every cache key of ACs with affcorr's A, so a new model or
-    default never reuses the old one's ACs; ``VIEWS_REVISION`` counts changes of the cascade
-    itself (2: screened tilt and tile groups)."""
+    affcorr's default affine Lucas-Kanade, which moves x2 too; ``LK_REVISION`` counts its
+    changes: 2, the neighbourhood start) and the pipeline's view cascade ("-views-auto"): part
+    of every cache key of ACs with affcorr's A, so a new model or default never reuses the old
+    one's ACs; ``VIEWS_REVISION`` counts changes of the cascade itself (2: screened tilt and
+    tile groups)."""
     import hashlib
 
     from affcorr.pipeline import PIPELINE_DEFAULTS
     from affcorr.shape import bundled_shape_model
 
     digest = hashlib.sha1(bundled_shape_model().read_bytes()).hexdigest()[:10]
-    return f"{digest}-lk-views-{PIPELINE_DEFAULTS['views']}{VIEWS_REVISION}"
+    return f"{digest}-lk{LK_REVISION}-views-{PIPELINE_DEFAULTS['views']}{VIEWS_REVISION}"
 
 
 @functools.cache

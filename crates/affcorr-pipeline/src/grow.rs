@@ -101,8 +101,10 @@ pub fn grow(
 ) -> Result<Grown> {
     options.validate()?;
     let refine = AffineRefineOptions {
-        // The neighbour's A is the prior; the identity is not (rotated and zoomed pairs).
+        // The neighbour's A is the prior; the identity is not (rotated and zoomed pairs), and
+        // the neighbourhood's similarity is that prior's source already.
         try_identity: false,
+        try_neighbours: false,
         ..AffineRefineOptions::default()
     };
     let sep2 = options.min_separation * options.min_separation;
