@@ -879,10 +879,14 @@ impl Pipeline {
                 best = WorkMatches { corrs, ..m };
             }
             if o.mode == ViewMode::Auto && (better || refining) {
-                // Few inliers: the view that undoes their map exactly may find many more.
+                // Few inliers (in number, or for the keypoint budget, as `views::WEAK_YIELD`
+                // judges the plain pass): the view that undoes their map exactly may find many
+                // more.
+                let few = inliers < REFINE_BELOW * o.min_inliers
+                    || (inliers as f64) < WEAK_YIELD * self.max_keypoints() as f64;
                 if better
                     && !refining
-                    && inliers < REFINE_BELOW * o.min_inliers
+                    && few
                     && let Some(r) = refinement_view(&view, &agreeing)
                 {
                     queue.push_front((r, None));
