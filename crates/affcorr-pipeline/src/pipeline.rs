@@ -32,8 +32,8 @@ use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
 use crate::views::{
     CONFIDENT_VIEW, REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec,
-    WEAK_RATIO, WEAK_YIELD, cascade_steps, guided_view, refinement_view, rival_views, screen,
-    screen_run, verified_fundamental, verify,
+    WEAK_RATIO, cascade_steps, guided_view, refinement_view, rival_views, screen, screen_run,
+    verified_fundamental, verify, weak_yield,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -692,7 +692,7 @@ impl Pipeline {
         // So may one verified by few inliers (`views::WEAK_YIELD`).
         let weak = verified
             && ((inliers as f64) < WEAK_RATIO * plain.corrs.len() as f64
-                || (inliers as f64) < WEAK_YIELD * self.max_keypoints() as f64);
+                || weak_yield(inliers, self.max_keypoints()));
         if verified && !weak && o.mode == ViewMode::Auto {
             reports[0].used = true;
             return Ok((plain, reports));
@@ -883,7 +883,7 @@ impl Pipeline {
                 // judges the plain pass): the view that undoes their map exactly may find many
                 // more.
                 let few = inliers < REFINE_BELOW * o.min_inliers
-                    || (inliers as f64) < WEAK_YIELD * self.max_keypoints() as f64;
+                    || weak_yield(inliers, self.max_keypoints());
                 if better
                     && !refining
                     && few

@@ -90,6 +90,12 @@ pub const RIVAL_MARGIN: f64 = 1.5;
 /// inliers at 1024 keypoints) and only the number of inliers tells them from the right one.
 pub const WEAK_YIELD: f64 = 0.1;
 
+/// Whether `inliers` are fewer than [`WEAK_YIELD`] of the keypoint budget: the yardstick of the
+/// plain pass (rivals) and of a synthetic view (its refinement).
+pub(crate) fn weak_yield(inliers: usize, keypoint_budget: usize) -> bool {
+    (inliers as f64) < WEAK_YIELD * keypoint_budget as f64
+}
+
 /// A synthetic view (with its refinement) that verifies with fewer than this many times
 /// [`ViewOptions::min_inliers`] does not end an auto cascade: it is kept, and a later view
 /// replaces it with [`RIVAL_MARGIN`] times its inliers. A dozen matches that agree with

@@ -9,7 +9,7 @@
 //!   λ = ρ²/2 the affine term is the mean squared displacement of a circle of radius ρ px mapped
 //!   by A instead of A_H.
 
-use super::simd::{BLOCK, dispatch, dot};
+use super::simd::{BLOCK, UPPER_3X3, dispatch, dot};
 use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, homography_affine};
 use crate::loss::Loss;
 use crate::problem::Problem;
@@ -266,8 +266,7 @@ impl HomographyProblem<'_> {
                 (ru[j], rv[j]) = (w[j] * (u[j] - x2[j].x), w[j] * (v[j] - x2[j].y));
                 rr[j] = u[j] * ru[j] + v[j] * rv[j];
             }
-            const PAIRS: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
-            for (k, &(a, b)) in PAIRS.iter().enumerate() {
+            for (k, &(a, b)) in UPPER_3X3.iter().enumerate() {
                 let pp: [f64; BLOCK] = std::array::from_fn(|j| p[a][j] * p[b][j]);
                 for (sum, weight) in [(0, &w), (1, &wu), (2, &wv), (3, &wuv)] {
                     pp_sums[sum][k] += dot(weight, &pp);

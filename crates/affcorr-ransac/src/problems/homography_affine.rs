@@ -19,7 +19,7 @@ use super::Correspondences;
 use super::epipolar_lm::{CHI2_1_MEDIAN, MAX_AFFINE_SCALE};
 use super::homography::HomographyProblem;
 use super::normal_eq::EntrySums;
-use super::simd::{BLOCK, dispatch, dot};
+use super::simd::{BLOCK, UPPER_3X3, dispatch, dot};
 use crate::loss::Loss;
 use crate::refine::{LeastSquares, Mat9, Vec9};
 use affcorr_geom::{Mat2, Mat3, Vec2};
@@ -163,7 +163,7 @@ impl AffineSums {
                     }
                     wd[j] = om[j] * d[e][j];
                 }
-                for (t, &(k, l)) in UPPER.iter().enumerate() {
+                for (t, &(k, l)) in UPPER_3X3.iter().enumerate() {
                     self.diag[r][t] += dot(&wu[k], &u[l]);
                     self.last[t] += dot(&wv[k], &v[l]);
                 }
@@ -182,7 +182,7 @@ impl AffineSums {
     /// The same sums as [`EntrySums`] (zeros where the structure has none).
     pub(crate) fn entry_sums(&self) -> EntrySums {
         let mut full = [[0.0; 9]; 9];
-        for (k, &(i, j)) in UPPER.iter().enumerate() {
+        for (k, &(i, j)) in UPPER_3X3.iter().enumerate() {
             for r in 0..2 {
                 full[3 * r + i][3 * r + j] = self.diag[r][k];
             }
@@ -209,9 +209,6 @@ impl AffineSums {
         sums
     }
 }
-
-/// The upper triangle of a symmetric 3×3 matrix, in [`AffineSums`]'s order.
-const UPPER: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
 
 /// The affine part of a homography refinement.
 #[derive(Debug, Clone, Copy)]

@@ -9,6 +9,10 @@
 /// Data per block.
 pub(crate) const BLOCK: usize = 16;
 
+/// The upper triangle (00, 01, 02, 11, 12, 22) of a symmetric 3×3 matrix: the order in which
+/// the kernels keep such sums.
+pub(crate) const UPPER_3X3: [(usize, usize); 6] = [(0, 0), (0, 1), (0, 2), (1, 1), (1, 2), (2, 2)];
+
 /// Σ aⱼ bⱼ in 4 interleaved partial sums, which the compiler maps onto SIMD lanes.
 #[inline(always)]
 pub(crate) fn dot(a: &[f64; BLOCK], b: &[f64; BLOCK]) -> f64 {
