@@ -86,6 +86,10 @@ def test_estimation_cache_and_report(tmp_path, monkeypatch):
     monkeypatch.setattr(pose, "run_worker", lambda *a: pytest.fail("worker called again"))
     again = pose.estimate(jobs, tmp_path, notes, versions)
     assert [r["pose_err"] for r in again] == [r["pose_err"] for r in rows]
+    # a new revision of affcorr's estimator re-estimates affcorr's rows instead of reusing them
+    monkeypatch.setattr(pose, "AFFCORR_ESTIMATOR_REVISION", pose.AFFCORR_ESTIMATOR_REVISION + 1)
+    with pytest.raises(pytest.fail.Exception, match="worker called again"):
+        pose.estimate(jobs, tmp_path, notes, versions)
 
     results = tmp_path / "results"
     meta = dict(

@@ -80,6 +80,10 @@ ESTIMATORS = [
 #: At least 200 samples: the adaptive stopping rule alone ends 2-AC RANSAC after ~10-30 samples
 #: when a wrong model has many inliers (seen on multi-plane scenes).
 LOCAL = {"affcorr-AC-min200": dict(min_iterations=200)}
+#: Counts changes of affcorr's own estimator (affcorr-ransac) that alter its results: its cached
+#: estimates carry it, so bumping it re-runs affcorr's rows and keeps the peers' (the cache holds
+#: no build hash; an installed wheel has none to give).
+AFFCORR_ESTIMATOR_REVISION = 1
 LABELS = {
     "opencv-USAC_MAGSAC": "OpenCV USAC_MAGSAC (5pt)",
     "poselib": "PoseLib (5pt)",
@@ -233,6 +237,7 @@ def _key(r: dict) -> tuple:
         r["estimator"],
         r["A_source"],
         r.get("shape_tag", ""),
+        r.get("estimator_rev", ""),
     )
 
 
@@ -262,12 +267,14 @@ def estimate(jobs: list[dict], tmp: Path, notes: list[str], versions: set) -> li
 
 
 def _job_key(j: dict, method: str, uses_ac: bool) -> tuple:
-    """An estimate's cache key; ACs with affcorr's A also carry the shape network's tag."""
+    """An estimate's cache key; ACs with affcorr's A also carry the shape network's tag, and
+    affcorr's estimators their revision (``AFFCORR_ESTIMATOR_REVISION``)."""
     p = j["pair"]
     source = j["A_source"] if uses_ac else "-"
     uses_shape = uses_ac and (source == "affcorr" or j["matcher"] == "affcorr")
     tag = matchers.shape_model_tag() if uses_shape else ""
-    return (p.dataset, p.name, j["matcher"], method, source, tag)
+    rev = f"est{AFFCORR_ESTIMATOR_REVISION}" if method.startswith("affcorr") else ""
+    return (p.dataset, p.name, j["matcher"], method, source, tag, rev)
 
 
 def _estimate(
@@ -348,7 +355,8 @@ def row(job: dict, method: str, uses_ac: bool, r, seconds: float) -> dict:
         pose_err=max(e_R, e_t),
         est_ms=1e3 * seconds,
         match_s=job["seconds"],
-        shape_tag=_job_key(job, method, uses_ac)[-1],
+        shape_tag=_job_key(job, method, uses_ac)[-2],
+        estimator_rev=_job_key(job, method, uses_ac)[-1],
     )
 
 
