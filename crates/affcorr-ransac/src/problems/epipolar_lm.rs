@@ -15,7 +15,7 @@
 
 use super::Correspondences;
 use super::normal_eq::EntrySums;
-use super::simd::{BLOCK, dispatch, dot};
+use super::simd::{BLOCK, Lanes, add_sums, dispatch};
 use crate::loss::Loss;
 use crate::refine::{Mat9, Vec9};
 use affcorr_geom::Mat3;
@@ -309,6 +309,7 @@ fn accumulate(
     let mut r = [0.0; BLOCK];
     let mut g = [[0.0; BLOCK]; 9];
     let (mut w, mut wr) = ([0.0; BLOCK], [0.0; BLOCK]);
+    let (mut g_lanes, mut gg_lanes) = ([Lanes::default(); 9], [Lanes::default(); 45]);
     for chunk in indices.chunks(BLOCK) {
         let len = chunk.len();
         for (j, &i) in chunk.iter().enumerate() {
@@ -333,14 +334,16 @@ fn accumulate(
         wr[len..].fill(0.0);
         let mut k = 0;
         for a in 0..9 {
-            g_sum[a] += dot(&wr, &g[a]);
+            g_lanes[a].add_dot(&wr, &g[a]);
             let wg: [f64; BLOCK] = std::array::from_fn(|j| w[j] * g[a][j]);
             for b in a..9 {
-                gg[k] += dot(&wg, &g[b]);
+                gg_lanes[k].add_dot(&wg, &g[b]);
                 k += 1;
             }
         }
     }
+    add_sums(g_sum, &g_lanes);
+    add_sums(gg, &gg_lanes);
     cost
 }
 

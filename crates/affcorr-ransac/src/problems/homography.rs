@@ -9,7 +9,7 @@
 //!   λ = ρ²/2 the affine term is the mean squared displacement of a circle of radius ρ px mapped
 //!   by A instead of A_H.
 
-use super::simd::{BLOCK, UPPER_3X3, dispatch, dot};
+use super::simd::{BLOCK, Lanes, UPPER_3X3, add_sums, dispatch};
 use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, homography_affine};
 use crate::loss::Loss;
 use crate::problem::Problem;
@@ -239,6 +239,8 @@ impl HomographyProblem<'_> {
         let (mut w, mut wu, mut wv, mut wuv) =
             ([0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK]);
         let (mut ru, mut rv, mut rr) = ([0.0; BLOCK], [0.0; BLOCK], [0.0; BLOCK]);
+        let mut pp_lanes = [[Lanes::default(); 6]; 4];
+        let mut g_lanes = [[Lanes::default(); 3]; 3];
         for chunk in indices.chunks(BLOCK) {
             let len = chunk.len();
             for (j, &i) in chunk.iter().enumerate() {
@@ -269,14 +271,23 @@ impl HomographyProblem<'_> {
             for (k, &(a, b)) in UPPER_3X3.iter().enumerate() {
                 let pp: [f64; BLOCK] = std::array::from_fn(|j| p[a][j] * p[b][j]);
                 for (sum, weight) in [(0, &w), (1, &wu), (2, &wv), (3, &wuv)] {
-                    pp_sums[sum][k] += dot(weight, &pp);
+                    pp_lanes[sum][k].add_dot(weight, &pp);
                 }
             }
             for k in 0..3 {
-                g[0][k] += dot(&ru, &p[k]);
-                g[1][k] += dot(&rv, &p[k]);
-                g[2][k] -= dot(&rr, &p[k]);
+                g_lanes[0][k].add_dot(&ru, &p[k]);
+                g_lanes[1][k].add_dot(&rv, &p[k]);
+                g_lanes[2][k].add_dot(&rr, &p[k]);
             }
+        }
+        for (sums, lanes) in pp_sums.into_iter().zip(&pp_lanes) {
+            add_sums(sums, lanes);
+        }
+        let [g0, g1, g2] = g;
+        add_sums(g0, &g_lanes[0]);
+        add_sums(g1, &g_lanes[1]);
+        for (gk, lanes) in g2.iter_mut().zip(&g_lanes[2]) {
+            *gk -= lanes.sum();
         }
         cost
     }

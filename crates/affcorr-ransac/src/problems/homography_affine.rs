@@ -19,7 +19,7 @@ use super::Correspondences;
 use super::epipolar_lm::{CHI2_1_MEDIAN, MAX_AFFINE_SCALE};
 use super::homography::HomographyProblem;
 use super::normal_eq::EntrySums;
-use super::simd::{BLOCK, UPPER_3X3, dispatch, dot};
+use super::simd::{BLOCK, Lanes, UPPER_3X3, add_sums, dispatch};
 use crate::loss::Loss;
 use crate::refine::{LeastSquares, Mat9, Vec9};
 use affcorr_geom::{Mat2, Mat3, Vec2};
@@ -108,6 +108,12 @@ impl AffineSums {
         let mut u = [[[0.0; BLOCK]; 3]; 2];
         let mut v = [[[0.0; BLOCK]; 3]; 4];
         let (mut d, mut omega) = ([[0.0; BLOCK]; 4], [[0.0; BLOCK]; 4]);
+        // The sums of `self`'s fields, in lanes until the last block.
+        let mut diag = [[Lanes::default(); 6]; 2];
+        let mut cross = [[Lanes::default(); 9]; 2];
+        let mut last = [Lanes::default(); 6];
+        let mut g_rows = [[Lanes::default(); 3]; 2];
+        let mut g_last = [Lanes::default(); 3];
         for chunk in indices.chunks(BLOCK) {
             let len = chunk.len();
             // The lanes past a short last block repeat its first AC (finite wherever the data
@@ -164,18 +170,25 @@ impl AffineSums {
                     wd[j] = om[j] * d[e][j];
                 }
                 for (t, &(k, l)) in UPPER_3X3.iter().enumerate() {
-                    self.diag[r][t] += dot(&wu[k], &u[l]);
-                    self.last[t] += dot(&wv[k], &v[l]);
+                    diag[r][t].add_dot(&wu[k], &u[l]);
+                    last[t].add_dot(&wv[k], &v[l]);
                 }
                 for k in 0..3 {
                     for l in 0..3 {
-                        self.cross[r][3 * k + l] += dot(&wu[k], &v[l]);
+                        cross[r][3 * k + l].add_dot(&wu[k], &v[l]);
                     }
-                    self.g_rows[r][k] += dot(&wd, &u[k]);
-                    self.g_last[k] += dot(&wd, &v[k]);
+                    g_rows[r][k].add_dot(&wd, &u[k]);
+                    g_last[k].add_dot(&wd, &v[k]);
                 }
             }
         }
+        for r in 0..2 {
+            add_sums(&mut self.diag[r], &diag[r]);
+            add_sums(&mut self.cross[r], &cross[r]);
+            add_sums(&mut self.g_rows[r], &g_rows[r]);
+        }
+        add_sums(&mut self.last, &last);
+        add_sums(&mut self.g_last, &g_last);
         cost
     }
 
