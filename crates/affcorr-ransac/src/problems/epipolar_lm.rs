@@ -111,7 +111,7 @@ pub(crate) fn affine_scale(
     }
     let (mut p, mut a) = (Vec::with_capacity(indices.len()), Vec::new());
     a.reserve(2 * indices.len());
-    for &i in indices {
+    for &i in super::noise_ratio_sample(indices) {
         if confidence.is_some_and(|c| c[i] <= 0.0) {
             continue;
         }
@@ -124,11 +124,10 @@ pub(crate) fn affine_scale(
     if p.len() < 5 {
         return None;
     }
-    let median = |v: &mut Vec<f64>| {
-        let k = v.len() / 2;
-        *v.select_nth_unstable_by(k, f64::total_cmp).1
-    };
-    let (mp, ma) = (median(&mut p), median(&mut a));
+    let (mp, ma) = (
+        super::median_in_place(&mut p),
+        super::median_in_place(&mut a),
+    );
     if !(mp.is_finite() && ma.is_finite()) {
         return None;
     }

@@ -10,7 +10,8 @@
 //!
 //! and 0 for the other row. Each AC adds the four residuals d = A_H(x1) − A, whitened by λ
 //! (px² per unit² of A: the ratio of the point to the affine noise variance, estimated from the
-//! inliers as the ratio of the medians of the squared components) and weighted by the AC's
+//! inliers as the ratio of the medians of the squared components, on at most
+//! `NOISE_RATIO_SAMPLE` of them) and weighted by the AC's
 //! confidence c_i: cost Σ_i c_i Σ_k ρ_A(λ d_k²), ρ_A the Cauchy loss at 3σ̂ of the point
 //! residuals, so that an AC whose A is off pulls little. This is the homography counterpart of
 //! `epipolar_lm`'s affine Sampson terms.
@@ -249,7 +250,7 @@ pub(crate) fn affine_terms<'c>(
         Vec::with_capacity(2 * inliers.len()),
         Vec::with_capacity(4 * inliers.len()),
     );
-    for &i in inliers {
+    for &i in super::noise_ratio_sample(inliers) {
         if confidence.is_some_and(|c| c[i] <= 0.0) {
             continue;
         }
@@ -263,11 +264,10 @@ pub(crate) fn affine_terms<'c>(
     if pts.len() < 10 {
         return None;
     }
-    let median = |v: &mut Vec<f64>| {
-        let k = v.len() / 2;
-        *v.select_nth_unstable_by(k, f64::total_cmp).1
-    };
-    let (mp, ma) = (median(&mut pts), median(&mut aff));
+    let (mp, ma) = (
+        super::median_in_place(&mut pts),
+        super::median_in_place(&mut aff),
+    );
     if !(mp.is_finite() && ma.is_finite()) || mp <= 0.0 {
         return None;
     }

@@ -79,7 +79,11 @@ mod tests {
         lanes.add_dot(&a, &b);
         lanes.add_dot(&c, &c);
         let want: f64 = (0..BLOCK).map(|j| a[j] * b[j] + c[j] * c[j]).sum();
-        assert!((lanes.sum() - want).abs() < 1e-12 * want.abs(), "{} vs {want}", lanes.sum());
+        assert!(
+            (lanes.sum() - want).abs() < 1e-12 * want.abs(),
+            "{} vs {want}",
+            lanes.sum()
+        );
         let mut out = [1.0, 2.0];
         add_sums(&mut out, &[lanes, Lanes::default()]);
         assert_eq!(out, [1.0 + lanes.sum(), 2.0]);
