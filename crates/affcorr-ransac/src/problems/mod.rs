@@ -237,3 +237,21 @@ pub(crate) fn check_affine_weight(w: f64, data: &Correspondences) -> Result<()> 
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_noise_ratio_sample_spans_the_inliers_and_keeps_small_sets_whole() {
+        let few: Vec<usize> = (0..300).collect();
+        assert!(noise_ratio_sample(&few).copied().eq(0..300));
+        let many: Vec<usize> = (0..1500).map(|i| 3 * i).collect();
+        let s: Vec<usize> = noise_ratio_sample(&many).copied().collect();
+        assert!(s.len() <= NOISE_RATIO_SAMPLE && s.len() >= NOISE_RATIO_SAMPLE * 9 / 10);
+        assert_eq!(s[0], 0);
+        assert!(*s.last().unwrap() >= 3 * 1490, "ends at {}", s.last().unwrap());
+        let mut v = [5.0, 1.0, 4.0, 2.0, 3.0];
+        assert_eq!(median_in_place(&mut v), 3.0);
+    }
+}
