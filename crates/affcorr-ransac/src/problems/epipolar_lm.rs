@@ -124,10 +124,7 @@ pub(crate) fn affine_scale(
     if p.len() < 5 {
         return None;
     }
-    let (mp, ma) = (
-        super::median_in_place(&mut p),
-        super::median_in_place(&mut a),
-    );
+    let (mp, ma) = (super::median_of_squares(&p), super::median_of_squares(&a));
     if !(mp.is_finite() && ma.is_finite()) {
         return None;
     }

@@ -265,8 +265,8 @@ pub(crate) fn affine_terms<'c>(
         return None;
     }
     let (mp, ma) = (
-        super::median_in_place(&mut pts),
-        super::median_in_place(&mut aff),
+        super::median_of_squares(&pts),
+        super::median_of_squares(&aff),
     );
     if !(mp.is_finite() && ma.is_finite()) || mp <= 0.0 {
         return None;

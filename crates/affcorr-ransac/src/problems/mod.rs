@@ -39,11 +39,13 @@ pub(crate) fn noise_ratio_sample(indices: &[usize]) -> impl Iterator<Item = &usi
         .step_by(indices.len().div_ceil(NOISE_RATIO_SAMPLE).max(1))
 }
 
-/// The upper median of `v` (the element at `len / 2` in sorted order); `v` is reordered.
-/// `v` must not be empty.
-pub(crate) fn median_in_place(v: &mut [f64]) -> f64 {
-    let k = v.len() / 2;
-    *v.select_nth_unstable_by(k, f64::total_cmp).1
+/// The upper median (the element at `len / 2` in sorted order) of `v`, whose entries are ≥ 0
+/// (squared residuals; +∞ and NaN allowed); `v` must not be empty. Such floats order as their
+/// bit patterns, so the selection runs on integers: about half the work of `total_cmp`.
+pub(crate) fn median_of_squares(v: &[f64]) -> f64 {
+    let mut bits: Vec<u64> = v.iter().map(|x| x.to_bits()).collect();
+    let k = bits.len() / 2;
+    f64::from_bits(*bits.select_nth_unstable(k).1)
 }
 
 /// Counts the data whose residual `r2(i)` is below `threshold_sq`.
@@ -250,8 +252,13 @@ mod tests {
         let s: Vec<usize> = noise_ratio_sample(&many).copied().collect();
         assert!(s.len() <= NOISE_RATIO_SAMPLE && s.len() >= NOISE_RATIO_SAMPLE * 9 / 10);
         assert_eq!(s[0], 0);
-        assert!(*s.last().unwrap() >= 3 * 1490, "ends at {}", s.last().unwrap());
-        let mut v = [5.0, 1.0, 4.0, 2.0, 3.0];
-        assert_eq!(median_in_place(&mut v), 3.0);
+        assert!(
+            *s.last().unwrap() >= 3 * 1490,
+            "ends at {}",
+            s.last().unwrap()
+        );
+        assert_eq!(median_of_squares(&[5.0, 1.0, 4.0, 2.0, 3.0]), 3.0);
+        assert_eq!(median_of_squares(&[f64::INFINITY, 0.0, 1e-300, 7.5]), 7.5);
+        assert_eq!(median_of_squares(&[f64::NAN, f64::INFINITY, 2.0]), f64::INFINITY);
     }
 }
