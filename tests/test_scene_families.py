@@ -61,3 +61,21 @@ def test_errors_of_the_truth_are_zero_and_failures_count_as_the_worst():
     assert sf.errors("relpose", None, sc) == (180.0, 180.0)
     h = sf.make_scene(np.random.default_rng(5), "homography", 300, sf.BASE)
     assert sf.errors("homography", dict(H=h["H"] * 3.0), h)[0] < 1e-9
+
+
+def test_the_paired_ratio_compares_methods_scene_by_scene():
+    def row(method, seed, e1, e2):
+        return dict(problem="relpose", family="base", method=method, seed=seed, err1=e1, err2=e2)
+
+    rows = [
+        row("ac-auto", 0, 0.1, 0.4),  # score 0.2
+        row("pts-auto", 0, 0.4, 0.4),  # 0.4: ratio 0.5
+        row("ac-auto", 1, 2.0, 2.0),  # 2.0
+        row("pts-auto", 1, 1.0, 1.0),  # 1.0: ratio 2
+        row("ac-auto", 2, 1.0, 1.0),  # no partner: left out
+        row("ac-auto", 0, 9.0, 9.0) | dict(family="narrow"),  # another family
+    ]
+    gm, below, n = sf.paired_ratio(rows, "relpose", "base", "ac-auto", "pts-auto")
+    assert (below, n) == (1, 2)
+    assert gm == pytest.approx(1.0)  # sqrt(0.5 * 2)
+    assert sf.paired_ratio(rows, "relpose", "hard", "ac-auto", "pts-auto") is None
