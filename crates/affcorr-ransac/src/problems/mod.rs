@@ -259,6 +259,9 @@ mod tests {
         );
         assert_eq!(median_of_squares(&[5.0, 1.0, 4.0, 2.0, 3.0]), 3.0);
         assert_eq!(median_of_squares(&[f64::INFINITY, 0.0, 1e-300, 7.5]), 7.5);
-        assert_eq!(median_of_squares(&[f64::NAN, f64::INFINITY, 2.0]), f64::INFINITY);
+        assert_eq!(
+            median_of_squares(&[f64::NAN, f64::INFINITY, 2.0]),
+            f64::INFINITY
+        );
     }
 }
