@@ -656,7 +656,8 @@ def real_pairs(args) -> int:
         print(f"chessboard: {e}", file=sys.stderr)
     pairs.append(pose_data.motorcycle_pair())
     rendered: set[str] = set()
-    for roll in (pose_data.ROOM_ROLL, pose_data.ROOM_ROLL_ROTATED)[: 2 if args.rooms else 0]:
+    rolls = (pose_data.ROOM_ROLL, pose_data.ROOM_ROLL_ROTATED) if args.rooms > 0 else ()
+    for roll in rolls:
         rooms = pose_data.room_pairs(args.rooms, roll=roll)
         pairs += rooms
         rendered |= {p.dataset for p in rooms}
@@ -882,7 +883,7 @@ def paired_ratio(rows: list[dict], problem: str, family: str, a: str, b: str):
 
 def targets(med: dict, problem: str, pf: list[str], fams, per_scene=()) -> list[str]:
     """Issue 22's targets for the default, family by family (``per_scene``: the rows of every
-    scene, for the paired ratio to points)."""
+    scene, for the paired ratios to points and to PoseLib)."""
     over = dict(fams)
     rows = []
     for f in pf:

@@ -41,7 +41,7 @@ pub(crate) fn noise_ratio_sample(indices: &[usize]) -> impl Iterator<Item = &usi
 
 /// The upper median (the element at `len / 2` in sorted order) of `v`, whose entries are ≥ 0
 /// (squared residuals; +∞ and NaN allowed); `v` must not be empty. Such floats order as their
-/// bit patterns, so the selection runs on integers: about half the work of `total_cmp`.
+/// bit patterns, so the selection compares integers instead of calling `total_cmp`.
 pub(crate) fn median_of_squares(v: &[f64]) -> f64 {
     let mut bits: Vec<u64> = v.iter().map(|x| x.to_bits()).collect();
     let k = bits.len() / 2;
@@ -257,6 +257,10 @@ mod tests {
             "ends at {}",
             s.last().unwrap()
         );
+    }
+
+    #[test]
+    fn the_median_of_squares_is_the_upper_median_with_infinities_and_nans_on_top() {
         assert_eq!(median_of_squares(&[5.0, 1.0, 4.0, 2.0, 3.0]), 3.0);
         assert_eq!(median_of_squares(&[f64::INFINITY, 0.0, 1e-300, 7.5]), 7.5);
         assert_eq!(
