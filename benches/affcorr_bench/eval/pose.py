@@ -336,6 +336,7 @@ def _estimate(
 
 
 def row(job: dict, method: str, uses_ac: bool, r, seconds: float) -> dict:
+    key = _job_key(job, method, uses_ac)
     p = job["pair"]
     e_R = e_t = float("inf")
     inliers = 0
@@ -355,8 +356,8 @@ def row(job: dict, method: str, uses_ac: bool, r, seconds: float) -> dict:
         pose_err=max(e_R, e_t),
         est_ms=1e3 * seconds,
         match_s=job["seconds"],
-        shape_tag=_job_key(job, method, uses_ac)[-2],
-        estimator_rev=_job_key(job, method, uses_ac)[-1],
+        shape_tag=key[-2],
+        estimator_rev=key[-1],
     )
 
 
