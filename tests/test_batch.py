@@ -297,3 +297,21 @@ def test_bad_arguments_name_themselves(images, tmp_path) -> None:
     cams.write_text("view0.png SIMPLE_RADIAL 320 256 300 160 128 0.01\n")
     k = batch.read_cameras(cams)["view0.png"].K()
     np.testing.assert_array_equal(k, [[300, 0, 160], [0, 300, 128], [0, 0, 1]])
+
+
+def test_shipped_models_share_one_folder_per_content(tmp_path) -> None:
+    """Ray workers write the shipped models to a folder named by their digest: the same models
+    reuse the folder (no folder left behind per worker), other models get their own, and a
+    damaged file is rewritten."""
+    from affcorr.batch._worker import shipped_models_dir
+
+    files = {"shape.onnx": b"shape bytes", "xfeat_backbone.onnx": b"backbone bytes"}
+    first = shipped_models_dir(files, root=tmp_path)
+    assert shipped_models_dir(dict(files), root=tmp_path) == first
+    assert {p.name: p.read_bytes() for p in first.iterdir()} == files
+    other = shipped_models_dir({**files, "shape.onnx": b"another shape"}, root=tmp_path)
+    assert other != first and (other / "shape.onnx").read_bytes() == b"another shape"
+    (first / "shape.onnx").write_bytes(b"truncat")
+    assert shipped_models_dir(files, root=tmp_path) == first
+    assert (first / "shape.onnx").read_bytes() == b"shape bytes"
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted([first.name, other.name])

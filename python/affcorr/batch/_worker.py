@@ -4,11 +4,14 @@ chunk of pairs in, one plain record per pair out (arrays and numbers only, cheap
 
 A worker never raises for a pair: a pair that fails is a record with its error. The models
 reach a worker as paths (a shared file system, the local executor) or, under Ray, as bytes in
-the object store, fetched once per worker process and written to a private folder.
+the object store, fetched once per worker process and written to a folder named by their
+digest (:func:`shipped_models_dir`), so that workers and batches with the same models share one
+folder instead of leaving one behind per process.
 """
 
 from __future__ import annotations
 
+import hashlib
 import os
 import socket
 import tempfile
@@ -260,6 +263,32 @@ def process_chunk(config: dict[str, Any], chunk: list[dict[str, Any]]) -> list[d
     return [st.pair(t) for t in chunk]
 
 
+def shipped_models_dir(files: dict[str, bytes], root: Path | None = None) -> Path:
+    """The folder holding `files` ({file name: bytes}) under `root` (the system's temporary
+    folder by default), named by a digest of names and bytes, written once and then reused.
+
+    Why a digest rather than a fresh temporary folder: Ray ends its workers without running
+    their clean-up, so a private folder per worker process would stay behind after every
+    batch. Each file is written to a temporary name and renamed, so a worker never loads a
+    half-written file that another worker on the same machine is writing.
+    """
+    digest = hashlib.sha256()
+    for name in sorted(files):
+        digest.update(name.encode() + b"\0" + len(files[name]).to_bytes(8, "little"))
+        digest.update(files[name])
+    folder = Path(root or tempfile.gettempdir()) / f"affcorr-models-{digest.hexdigest()[:16]}"
+    folder.mkdir(parents=True, exist_ok=True)
+    for name, data in files.items():
+        path = folder / name
+        if path.is_file() and path.stat().st_size == len(data) and path.read_bytes() == data:
+            continue
+        fd, partial = tempfile.mkstemp(dir=folder, prefix=f".{name}.")
+        with os.fdopen(fd, "wb") as handle:
+            handle.write(data)
+        os.replace(partial, path)
+    return folder
+
+
 def process_chunk_shipped(
     config: dict[str, Any],
     box: list[Any],
@@ -276,13 +305,11 @@ def process_chunk_shipped(
         from affcorr.pipeline import _FILES
 
         files: dict[str, bytes] = ray.get(box[0])  # {role: bytes}
-        folder = Path(tempfile.mkdtemp(prefix="affcorr-models-"))
+        names = {role: "shape.onnx" if role == "shape" else _FILES[role] for role in files}
+        folder = shipped_models_dir({names[r]: data for r, data in files.items()})
         models: dict[str, Path] = {"_dir": folder}
-        for role, data in files.items():
-            path = folder / ("shape.onnx" if role == "shape" else _FILES[role])
-            path.write_bytes(data)
-            if role == "shape":
-                models["shape"] = path
+        if "shape" in files:
+            models["shape"] = folder / "shape.onnx"
         st = _state(config, models)
     st.shipped_images = images or {}
     return [st.pair(t) for t in chunk]
