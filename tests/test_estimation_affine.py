@@ -53,6 +53,32 @@ def test_poor_acs_are_never_much_worse_than_points():
     assert default < 1.1 * points, (default, points)
 
 
+def test_info_reports_the_affine_weight_measured_on_the_data():
+    # Exact A keeps the default 50 px^2; A off by 30% is scored at the lower weight its
+    # measured noise allows (the Rust test checks that this keeps more true inliers); an
+    # explicit weight is used as given; H and points score by points.
+    exact, noisy = scenes(aff=0.0, px=0.5, seeds=2), scenes(aff=0.3, px=0.5, seeds=2)
+    for s in exact:
+        for est in (affcorr.estimate_relative_pose, affcorr.estimate_fundamental):
+            args = (
+                (s["corrs"], s["K1"], s["K2"])
+                if est is affcorr.estimate_relative_pose
+                else (s["corrs"],)
+            )
+            assert est(*args, threshold=3.0)[1].affine_weight == 50.0
+    for s in noisy:
+        _, info = affcorr.estimate_relative_pose(s["corrs"], s["K1"], s["K2"], threshold=3.0)
+        assert 0.0 < info.affine_weight < 25.0, info.affine_weight
+        _, info = affcorr.estimate_fundamental(s["corrs"], threshold=3.0)
+        assert 0.0 < info.affine_weight < 25.0, info.affine_weight
+        _, info = affcorr.estimate_fundamental(s["corrs"], threshold=3.0, affine_weight=7.5)
+        assert info.affine_weight == 7.5
+        _, info = affcorr.estimate_fundamental(s["corrs"][:, :4].copy(), threshold=3.0)
+        assert info.affine_weight == 0.0
+        _, info = affcorr.estimate_homography(s["corrs"], threshold=3.0)
+        assert info.affine_weight == 0.0
+
+
 def test_zero_confidence_is_points_and_confidence_is_per_ac():
     s = scenes(aff=0.01, px=0.5, seeds=1)[0]
     n = len(s["corrs"])

@@ -75,6 +75,9 @@ TORCH_SETS = (
 # The pipeline exactly as a user gets it (the default matcher, affine refinement and the view
 # cascade on) on every set: what the defaults cost and give, beside the matcher alone.
 DEFAULTS_ROW = "xfeat-lighterglue (pipeline defaults)"
+# The most accurate matcher with the same defaults, on the sets upstream torch runs: what the
+# affine refinement and the cascade add to it, and whether it should be the default anywhere.
+DEFAULTS_ALIKED_ROW = "aliked-lightglue (pipeline defaults)"
 # The view cascade (views="auto", the pipeline's default) with the default and the most
 # accurate matcher, on the rotated sets and the upright indoor set (what it costs there).
 CASCADE = ("xfeat-lighterglue", "aliked-lightglue")
@@ -319,6 +322,11 @@ def main(argv=None) -> None:
         lambda: runner("xfeat-lighterglue", k, defaults=True),
         tuple(sets),
     )
+    if torch_sets:
+        methods[DEFAULTS_ALIKED_ROW] = (
+            lambda: runner("aliked-lightglue", k, defaults=True),
+            torch_sets,
+        )
     if not args.no_torch:
         for m in UPSTREAM:
             if torch_sets:
@@ -368,8 +376,8 @@ def write(args, rows, t_start, load0) -> None:
         f"keypoints; {THREADS} threads (ONNX Runtime and torch); no affine refinement; views "
         "off (the matcher alone) except in the rows 'views auto' (the pipeline's default "
         "view cascade, whose s/pair is the wall time of the whole match_pair) and "
-        f"'{DEFAULTS_ROW}' (the pipeline as constructed with nothing but its keypoints and "
-        "threads: affine refinement and the view cascade on; s/pair the wall time of the "
+        f"'{DEFAULTS_ROW}' and '{DEFAULTS_ALIKED_ROW}' (the pipeline as constructed with "
+        "nothing but its matcher, keypoints and threads: affine refinement and the view cascade on; s/pair the wall time of the "
         "whole match_pair, shape network and refinement included).",
         "",
         "Pose sets: relative pose from the matches by affcorr's 5-point RANSAC on points (1 px "

@@ -229,6 +229,7 @@ pub(crate) struct Outcome<M> {
     refinements: usize,
     residual_evaluations: u64,
     sprt_rejections: usize,
+    affine_weight: f64,
 }
 
 /// `NoModel` becomes a NaN model with no inliers; every other error is a `ValueError`.
@@ -248,6 +249,7 @@ pub(crate) fn outcome<M>(
             refinements: e.refinements,
             residual_evaluations: e.residual_evaluations,
             sprt_rejections: e.sprt_rejections,
+            affine_weight: e.affine_weight,
         }),
         Err(RansacError::NoModel { iterations }) => Ok(Outcome {
             model: nan,
@@ -259,6 +261,7 @@ pub(crate) fn outcome<M>(
             refinements: 0,
             residual_evaluations: 0,
             sprt_rejections: 0,
+            affine_weight: 0.0,
         }),
         Err(e) => Err(e),
     }
@@ -289,6 +292,7 @@ fn info<'py, M>(py: Python<'py>, o: &Outcome<M>) -> PyResult<Bound<'py, PyDict>>
     d.set_item("refinements", o.refinements)?;
     d.set_item("residual_evaluations", o.residual_evaluations)?;
     d.set_item("sprt_rejections", o.sprt_rejections)?;
+    d.set_item("affine_weight", o.affine_weight)?;
     Ok(d)
 }
 

@@ -51,10 +51,13 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
                                       accuracy, slightly more iterations; ``False``: verify every
                                       hypothesis on all data
   ``affine_weight``      ``None``     weight (px^2) of the affine residual in scoring (``(N, 8)``
-                                      only; 0: points only); ``None``: 50 for F and the relative
-                                      pose on ACs (points again, sampled and scored, when it
-                                      costs over 20% of the inliers or a points model explains
-                                      1.25x more: A too poor; docs/estimation.md), 0 otherwise
+                                      only; 0: points only); ``None``: for F and the relative
+                                      pose on ACs, 50, or the lower weight that the noise of A
+                                      measured on the first run's inliers allows (then run
+                                      again with it); points again, sampled and scored, when
+                                      it costs over 20% of the inliers or a points model
+                                      explains 1.25x more: A too poor; docs/estimation.md);
+                                      0 otherwise. ``info.affine_weight`` is the weight used
   ``affine_refinement``  ``"final"``  where the affine terms of ACs enter the fits of H, F
                                       and the relative pose (``(N, 8)`` only): ``"off"``,
                                       ``"final"`` (the final refinement) or ``"all"`` (local
@@ -143,6 +146,10 @@ class RansacInfo:
         residual_evaluations: residuals computed to verify and score models (what the SPRT
             saves).
         sprt_rejections: hypotheses rejected by the SPRT (0 without it).
+        affine_weight: the weight (px^2) of the affine residual in scoring, 0 for points
+            only. By default, for F and the relative pose on ``(N, 8)`` data, 50 px^2 or the
+            lower weight that the noise of A measured on the data allows (0 when the estimate
+            fell back to points).
     """
 
     inliers: NDArray[np.bool_]
@@ -153,6 +160,7 @@ class RansacInfo:
     refinements: int
     residual_evaluations: int = 0
     sprt_rejections: int = 0
+    affine_weight: float = 0.0
 
     @property
     def inlier_ratio(self) -> float:

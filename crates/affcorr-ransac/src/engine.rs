@@ -48,6 +48,9 @@ pub struct Estimate<M> {
     pub residual_evaluations: u64,
     /// Hypotheses rejected by the SPRT (0 without it).
     pub sprt_rejections: usize,
+    /// The weight λ (px²) of the affine residual in scoring (0: points only); by default
+    /// measured on the data ([`crate::estimators::EstimatorOptions::affine_weight`]).
+    pub affine_weight: f64,
 }
 
 /// Adaptive bound on the number of iterations for `inliers` of `n` at `confidence`, when an
@@ -353,6 +356,7 @@ where
         refinements,
         residual_evaluations: scratch.evaluations,
         sprt_rejections: sprt.map_or(0, |s| s.rejections),
+        affine_weight: problem.scoring_affine_weight(),
     })
 }
 

@@ -13,7 +13,7 @@ use crate::problem::Problem;
 use crate::problems::fundamental::FundamentalProblem;
 use crate::problems::homography::HomographyProblem;
 use crate::problems::relpose::{PoseModel, RelativePoseProblem};
-use crate::problems::{Correspondences, SampleKind, check_affine_weight, check_kind};
+use crate::problems::{Correspondences, SampleKind, check_affine_weight, check_kind, epipolar_lm};
 use crate::sampler::{ProsacSampler, UniformSampler};
 use crate::score::{MagsacPlusPlus, Msac, Scoring};
 use affcorr_geom::Mat3;
@@ -63,9 +63,11 @@ pub struct EstimatorOptions {
     /// Scoring function. Default [`ScoringKind::Auto`].
     pub scoring: ScoringKind,
     /// Weight λ (px²) of the affine residual in scoring; `Some(0.0)`: points only. `None`
-    /// (default): [`DEFAULT_AFFINE_WEIGHT`] for the fundamental matrix and the relative pose
-    /// when the data carry A, falling back to 0 when A is too poor
-    /// ([`DEFAULT_AFFINE_FALLBACK`]); 0 otherwise (H, points). See each problem's module for its units.
+    /// (default), for the fundamental matrix and the relative pose when the data carry A:
+    /// [`DEFAULT_AFFINE_WEIGHT`], or the lower weight that the data show A's noise to allow
+    /// (measured on the inliers of a first run, which is then run again with it), falling back
+    /// to 0 when A is too poor ([`DEFAULT_AFFINE_FALLBACK`]); 0 otherwise (H, points). The
+    /// weight used is [`Estimate::affine_weight`]. See each problem's module for its units.
     pub affine_weight: Option<f64>,
     /// Per-AC confidence in [0, 1] of the affine part ((N, 8) data only): it scales each AC's
     /// affine term in scoring (with `affine_weight`) and in the refinements (with
@@ -103,6 +105,30 @@ fn epipolar_affine_weight(data: &Correspondences, opts: &EstimatorOptions) -> (f
         None if data.has_affine() => (DEFAULT_AFFINE_WEIGHT, true),
         None => (0.0, false),
     }
+}
+
+/// The default affine weight measured on the data: λ̂, the ratio of the point to the affine
+/// noise variance ([`epipolar_lm::affine_scale`], what the final refinement weighs A by), on the
+/// inliers of `first` (the estimate scored with [`DEFAULT_AFFINE_WEIGHT`]) under its pixel F,
+/// when it is below that weight; `None` otherwise (or when too few ACs carry a confidence).
+///
+/// Why: the fixed weight assumes A accurate to about a tenth of the point noise per 10 px. ACs
+/// noisier than that (learned A on blurred, texture-poor walls) make λ·SD_A exceed the
+/// threshold for true inliers, and the affine-scored model drops 3–10% of the point inliers.
+/// Scoring at λ̂ weighs each AC's affine part as much as its noise allows, like the final
+/// refinement does; where A is as accurate as assumed or better (λ̂ ≥ the default), nothing
+/// changes, so the gains of the uncapped term on one plane and narrow baselines stay
+/// (benches/results/scene_families.md, docs/estimation.md).
+fn measured_affine_weight(
+    data: &Correspondences,
+    f: &Mat3,
+    first: &[bool],
+    opts: &EstimatorOptions,
+) -> Option<f64> {
+    let inliers: Vec<usize> = (0..data.len()).filter(|&i| first[i]).collect();
+    let confidence = opts.affine_confidence.as_deref();
+    let (lambda, _) = epipolar_lm::affine_scale(data, f, &inliers, confidence)?;
+    (lambda < DEFAULT_AFFINE_WEIGHT).then_some(lambda)
 }
 
 /// The number of data whose residual under `model` in `problem` is below `threshold`.
@@ -289,9 +315,14 @@ pub fn estimate_fundamental(
         FundamentalProblem::new(data, kind, w, opts.ransac.threshold)
             .with_affine_confidence(opts.affine_confidence.as_deref())
     };
-    let est = run(&problem(weight, kind), opts, ScoringKind::Msac)?;
+    let mut est = run(&problem(weight, kind), opts, ScoringKind::Msac)?;
     if !default {
         return Ok(est);
+    }
+    if let Some(w) = measured_affine_weight(data, &est.model, &est.inliers, opts)
+        && let Ok(again) = run(&problem(w, kind), opts, ScoringKind::Msac)
+    {
+        est = again;
     }
     Ok(points_fallback(&problem(0.0, SampleKind::Points), &est, opts).unwrap_or(est))
 }
@@ -322,6 +353,14 @@ pub fn estimate_relative_pose(
     };
     let mut problem = make(weight, kind);
     let mut est = run(&problem, opts, ScoringKind::Msac)?;
+    if default
+        && let Some(w) = measured_affine_weight(data, &est.model.fundamental, &est.inliers, opts)
+    {
+        let again = make(w, kind);
+        if let Ok(e) = run(&again, opts, ScoringKind::Msac) {
+            (est, problem) = (e, again);
+        }
+    }
     if default {
         let points = make(0.0, SampleKind::Points);
         if let Some(p) = points_fallback(&points, &est, opts) {

@@ -92,6 +92,12 @@ pub trait Problem: Sync {
         false
     }
 
+    /// The weight λ (px²) of the affine residual in [`Problem::residuals`] (0: points only),
+    /// reported in [`crate::engine::Estimate::affine_weight`]. Default 0.
+    fn scoring_affine_weight(&self) -> f64 {
+        0.0
+    }
+
     /// Whether local optimisation tries [`Problem::refine`] beside the linear fit
     /// ([`Problem::fit_nonminimal`]) at its narrow steps. Default true. A problem whose linear
     /// fit on the inliers already lands in the final refinement's basin can skip it: LO only

@@ -423,3 +423,62 @@ fn poor_acs_of_the_true_model_never_lose_to_a_consistent_decoy() {
         "affine scoring chose the decoy in only {decoys} of 4 trials"
     );
 }
+
+#[test]
+fn the_default_affine_weight_follows_the_noise_of_a() {
+    // Exact A keeps the default weight; A noisier than it assumes is scored at the weight its
+    // measured noise allows, which keeps more of the true inliers than the fixed weight does.
+    // An explicit weight is used as given, and points score by points.
+    let mut rng = Pcg64::seed_from_u64(26);
+    let default = affcorr_ransac::DEFAULT_AFFINE_WEIGHT;
+    let opts = |seed| EstimatorOptions {
+        ransac: RansacOptions {
+            threshold: 1.5,
+            seed,
+            ..Default::default()
+        },
+        ..Default::default()
+    };
+    let fixed = |seed| EstimatorOptions {
+        affine_weight: Some(default),
+        ..opts(seed)
+    };
+    for trial in 0..3 {
+        let scene = PlaneScene::random(&mut rng);
+        let (k1, k2) = (&scene.k1, &scene.k2);
+        let exact = make_data(&mut rng, &scene, 4, 500, 0.3, 0.5, 0.0);
+        let e = estimate_relative_pose(&exact.data, k1, k2, &opts(trial)).unwrap();
+        assert_eq!(e.affine_weight, default, "trial {trial}: exact A");
+        let f = estimate_fundamental(&exact.data, &opts(trial)).unwrap();
+        assert_eq!(f.affine_weight, default, "trial {trial}: exact A, F");
+
+        let noisy = make_data(&mut rng, &scene, 4, 500, 0.3, 0.5, 0.3);
+        let truth = &noisy.is_inlier;
+        let e = estimate_relative_pose(&noisy.data, k1, k2, &opts(trial)).unwrap();
+        let w = e.affine_weight;
+        assert!(w > 0.0 && w < default / 2.0, "trial {trial}: weight {w}");
+        let r_err = angle_deg(&(e.model.pose.r.transpose() * scene.pose.r));
+        assert!(r_err < 0.5, "trial {trial}: pose {r_err}°");
+        let by_fixed = estimate_relative_pose(&noisy.data, k1, k2, &fixed(trial)).unwrap();
+        let (measured, assumed) = (recall(truth, &e.inliers), recall(truth, &by_fixed.inliers));
+        assert!(
+            measured > assumed + 0.02,
+            "trial {trial}: recall {measured:.3} at the measured weight, {assumed:.3} at {default}"
+        );
+        let f = estimate_fundamental(&noisy.data, &opts(trial)).unwrap();
+        let by_fixed = estimate_fundamental(&noisy.data, &fixed(trial)).unwrap();
+        assert!(f.affine_weight > 0.0 && f.affine_weight < default / 2.0);
+        assert!(recall(truth, &f.inliers) > recall(truth, &by_fixed.inliers) + 0.02);
+
+        assert_eq!(by_fixed.affine_weight, default);
+        let points = noisy.data.points_only();
+        assert_eq!(
+            estimate_fundamental(&points, &opts(trial))
+                .unwrap()
+                .affine_weight,
+            0.0
+        );
+        let h = estimate_homography(&noisy.data, &opts(trial)).unwrap();
+        assert_eq!(h.affine_weight, 0.0, "H scores by points by default");
+    }
+}

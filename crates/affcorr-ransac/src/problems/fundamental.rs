@@ -227,6 +227,10 @@ impl Problem for FundamentalProblem<'_> {
         self.data.has_usable_affine(self.confidence)
     }
 
+    fn scoring_affine_weight(&self) -> f64 {
+        self.affine_weight
+    }
+
     fn sample_support(&self, f: &Mat3, threshold_sq: f64) -> Option<usize> {
         epipolar_seeds(self.data, f, self.kind, threshold_sq)
     }

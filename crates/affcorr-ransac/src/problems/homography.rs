@@ -109,6 +109,10 @@ impl Problem for HomographyProblem<'_> {
         self.data.has_usable_affine(self.confidence)
     }
 
+    fn scoring_affine_weight(&self) -> f64 {
+        self.affine_weight
+    }
+
     fn sample_size(&self) -> usize {
         match self.kind {
             SampleKind::Points => 4,

@@ -3,7 +3,7 @@
 //! Each keeps its data as structure of arrays ([`Correspondences`]) so residual loops stream
 //! through memory, and takes its minimal samples either as points or as ACs ([`SampleKind`]).
 
-mod epipolar_lm;
+pub(crate) mod epipolar_lm;
 pub mod fundamental;
 pub mod homography;
 mod homography_affine;

@@ -167,6 +167,10 @@ impl Problem for RelativePoseProblem<'_> {
         self.pixels.has_usable_affine(self.confidence)
     }
 
+    fn scoring_affine_weight(&self) -> f64 {
+        self.affine_weight
+    }
+
     fn sample_support(&self, m: &PoseModel, threshold_sq: f64) -> Option<usize> {
         epipolar_seeds(self.pixels, &m.fundamental, self.kind, threshold_sq)
     }
