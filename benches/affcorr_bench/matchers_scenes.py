@@ -377,8 +377,9 @@ def write(args, rows, t_start, load0) -> None:
         "off (the matcher alone) except in the rows 'views auto' (the pipeline's default "
         "view cascade, whose s/pair is the wall time of the whole match_pair) and "
         f"'{DEFAULTS_ROW}' and '{DEFAULTS_ALIKED_ROW}' (the pipeline as constructed with "
-        "nothing but its matcher, keypoints and threads: affine refinement and the view cascade on; s/pair the wall time of the "
-        "whole match_pair, shape network and refinement included).",
+        "nothing but its matcher, keypoints and threads: affine refinement and the view "
+        "cascade on; s/pair the wall time of the whole match_pair, shape network and "
+        "refinement included).",
         "",
         "Pose sets: relative pose from the matches by affcorr's 5-point RANSAC on points (1 px "
         "Sampson, seed 0), AUC in percent of max(rotation, translation direction) error up to "
