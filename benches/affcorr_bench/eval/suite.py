@@ -21,6 +21,10 @@ RESULTS = common.RESULTS / "eval"
 CACHE = common.EVAL_STATE / ".cache"
 #: Bump when a matcher of the registry changes, so cached matches are recomputed.
 MATCHES_VERSION = 1
+#: Counts changes of affcorr's pipeline that alter its matches (the view cascade's steps, the
+#: refinement): affcorr's cached matches carry it, so bumping it re-runs affcorr's rows and
+#: keeps the peers'. 2: third-size tiles magnified by 3 in the cascade.
+AFFCORR_PIPELINE_REVISION = 2
 #: Debian's OpenBLAS, unpacked by setup.sh (not installed: the machine's libblas stays as is).
 OPENBLAS = CACHE / "openblas" / "usr/lib/x86_64-linux-gnu/openblas-pthread"
 
@@ -44,7 +48,9 @@ def use_openblas() -> None:
 def _key(pair, name: str, max_keypoints: int) -> Path:
     h = hashlib.sha1(pair.img1.tobytes() + pair.img2.tobytes()).hexdigest()[:10]
     folder = CACHE / "matches" / f"v{MATCHES_VERSION}" / f"{pair.id}-{h}"
-    shape = f"-shape{matchers.shape_model_tag()}" if name == "affcorr" else ""
+    shape = ""
+    if name == "affcorr":
+        shape = f"-shape{matchers.shape_model_tag()}-p{AFFCORR_PIPELINE_REVISION}"
     return folder / f"{name}-k{max_keypoints}{shape}.npz"
 
 

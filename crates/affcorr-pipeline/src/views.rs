@@ -31,7 +31,8 @@
 //!      of A and of B, each against the other image as it is and rotated by 270°, 90° and
 //!      180° (a steep tilt of a rotated pair needs both undone); **tiles** of B (half its
 //!      size, magnified by 2, against A shrunk by ½: A a 3–6× zoom into B) and of A, one
-//!      group ranked by the screen but matched whole ([`Step::Ranked`]); tilts
+//!      group ranked by the screen but matched whole ([`Step::Ranked`]); then third-size
+//!      tiles magnified by 3 against the other image as it is (6×), ranked the same; tilts
 //!      t = 4 (8 directions) of A and of B against the rotations. A group extracts each of
 //!      its warped images once, ranks its views by XFeat's mutual nearest neighbours and a
 //!      homography's inliers (milliseconds, where LighterGlue and the ACs take hundreds),
@@ -364,7 +365,8 @@ impl ViewSpec {
                 self.tilt_angle.to_degrees()
             ));
         }
-        if let Some([x0, y0, x1, y1]) = self.window {
+        if let Some(w) = self.window {
+            let [x0, y0, x1, y1] = w.map(short);
             parts.push(format!("tile [{x0}, {y0}; {x1}, {y1}]"));
         }
         let other = if self.image == ViewImage::A { "B" } else { "A" };
@@ -377,6 +379,12 @@ impl ViewSpec {
         }
         parts.join(" ")
     }
+}
+
+/// `v` to at most two decimals, without trailing zeros: 0.5, 0.33, 1.
+fn short(v: f64) -> String {
+    let text = format!("{v:.2}");
+    text.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
 /// What one view of the cascade gave.
@@ -477,6 +485,19 @@ pub fn cascade_steps() -> Vec<Step> {
     // The tiles of both images in one group: which image is the zoomed one is not known,
     // and the screen ranks the 18 views together, so that the right tile of either image
     // runs before the other image's group is reached.
+    // Stronger zooms (6×): the zoomed image's content is a sixth of the other's side, a third
+    // of a half-size tile, where about a ninth of the tile's keypoints land: too few. Third-
+    // size tiles magnified by 3 give it a quarter of them (and more where it sits inside one)
+    // and meet the zoomed image as it is (its features are the plain pass's): 2× apart,
+    // within the matcher's range.
+    let third_tiles = |image| {
+        [1.0 / 3.0, 0.0, 2.0 / 3.0].into_iter().flat_map(move |y0| {
+            [1.0 / 3.0, 0.0, 2.0 / 3.0]
+                .into_iter()
+                .map(move |x0| ViewSpec::tile(image, 3.0, x0, y0, 1.0 / 3.0, 1.0))
+        })
+    };
+    steps.push(Step::Ranked(third_tiles(B).chain(third_tiles(A)).collect()));
     steps.push(Step::Ranked(tiles(B).chain(tiles(A)).collect()));
     steps.push(Step::Screened(rotated_tilts(A, 4.0, 8).collect()));
     steps.push(Step::Screened(rotated_tilts(B, 4.0, 8).collect()));
@@ -699,7 +720,7 @@ mod tests {
     #[test]
     fn candidates_cover_rotation_zoom_and_tilt_without_repeats() {
         let v = candidate_views();
-        assert_eq!(v.len(), 7 + 4 + 32 + 18 + 32 + 32);
+        assert_eq!(v.len(), 7 + 4 + 32 + 18 + 18 + 32 + 32);
         let labels: std::collections::BTreeSet<String> = v.iter().map(|s| s.label()).collect();
         assert_eq!(labels.len(), v.len());
         assert!(labels.contains("B rot 90°") && labels.contains("A zoom 0.25"));
@@ -709,6 +730,8 @@ mod tests {
         );
         assert!(labels.contains("B tilt 2 @45.0° + A rot 180°"));
         assert!(labels.contains("B zoom 2 tile [0.5, 0.25; 1, 0.75] + A zoom 0.5"));
+        assert!(labels.contains("A zoom 3 tile [0.33, 0; 0.67, 0.33]"));
+        assert!(labels.contains("B zoom 3 tile [0, 0.67; 0.33, 1]"));
     }
 
     #[test]
