@@ -79,3 +79,16 @@ def test_the_paired_ratio_compares_methods_scene_by_scene():
     assert (below, n) == (1, 2)
     assert gm == pytest.approx(1.0)  # sqrt(0.5 * 2)
     assert sf.paired_ratio(rows, "relpose", "hard", "ac-auto", "pts-auto") is None
+
+
+def test_a_selection_of_families_gets_the_scenes_of_the_full_run():
+    # Scenes are seeded by the family's place in FAMILIES, so `--families` reproduces the
+    # full run's scenes and its rows can be compared with the full table.
+    full = sf.make_jobs(["fundamental"], sf.FAMILIES, 2, 50)
+    some = sf.make_jobs(["fundamental"], [f for f in sf.FAMILIES if f[0] == "A 10%"], 2, 50)
+    same = [j for j in full if j["family"] == "A 10%"]
+    assert [j["seed"] for j in some] == [0, 1] and len(same) == 2
+    for a, b in zip(some, same):
+        np.testing.assert_array_equal(a["scene"]["corrs"], b["scene"]["corrs"])
+    other = [j for j in full if j["family"] == "A 3%"][0]
+    assert not np.array_equal(some[0]["scene"]["corrs"], other["scene"]["corrs"])

@@ -416,6 +416,33 @@ def _load_scenes(path: Path) -> list[dict]:
     return jobs
 
 
+def make_jobs(problems, fams, seeds: int, n: int) -> list[dict]:
+    """The scenes of `problems` × `fams` (a selection of FAMILIES) × `seeds`, each with its
+    problem, family, seed and threshold.
+
+    A scene is seeded by its family's place in FAMILIES, not in the selection: `--families`
+    gives the same scenes as the full run, so the two can be compared."""
+    names = [f[0] for f in FAMILIES]
+    jobs = []
+    for problem in problems:
+        for fam, over in fams:
+            if not family_applies(problem, over):
+                continue
+            s = {**BASE, **over}
+            for seed in range(seeds):
+                rng = np.random.default_rng([22, PROBLEMS.index(problem), names.index(fam), seed])
+                jobs.append(
+                    dict(
+                        problem=problem,
+                        family=fam,
+                        seed=seed,
+                        thr=threshold(problem, s["px"]),
+                        scene=make_scene(rng, problem, n, s),
+                    )
+                )
+    return jobs
+
+
 def worker(src: str, dst: str, repeat: int = 1) -> int:
     import cv2
 
@@ -475,24 +502,7 @@ def main(argv: list[str] | None = None) -> int:
     start = time.time()
     load_start = common.load_average()
     fams = [f for f in FAMILIES if args.families is None or f[0] in args.families]
-    jobs = []
-    for problem in args.problems:
-        for fi, (fam, over) in enumerate(fams):
-            if not family_applies(problem, over):
-                continue
-            s = {**BASE, **over}
-            for seed in range(args.seeds):
-                rng = np.random.default_rng([22, PROBLEMS.index(problem), fi, seed])
-                scene = make_scene(rng, problem, args.n, s)
-                jobs.append(
-                    dict(
-                        problem=problem,
-                        family=fam,
-                        seed=seed,
-                        thr=threshold(problem, s["px"]),
-                        scene=scene,
-                    )
-                )
+    jobs = make_jobs(args.problems, fams, args.seeds, args.n)
     print(f"{len(jobs)} scenes", flush=True)
 
     rows = []

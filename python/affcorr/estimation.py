@@ -52,12 +52,12 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
                                       hypothesis on all data
   ``affine_weight``      ``None``     weight (px^2) of the affine residual in scoring (``(N, 8)``
                                       only; 0: points only); ``None``: for F and the relative
-                                      pose on ACs, 50, or the lower weight that the noise of A
-                                      measured on the first run's inliers allows (then run
-                                      again with it); points again, sampled and scored, when
+                                      pose on ACs, 50 (points again, sampled and scored, when
                                       it costs over 20% of the inliers or a points model
-                                      explains 1.25x more: A too poor; docs/estimation.md);
-                                      0 otherwise. ``info.affine_weight`` is the weight used
+                                      explains 1.25x more: A too poor), else the lower weight
+                                      that the noise of A measured on its inliers allows
+                                      (then run again with it; docs/estimation.md); 0
+                                      otherwise. ``info.affine_weight`` is the weight used
   ``affine_refinement``  ``"final"``  where the affine terms of ACs enter the fits of H, F
                                       and the relative pose (``(N, 8)`` only): ``"off"``,
                                       ``"final"`` (the final refinement) or ``"all"`` (local

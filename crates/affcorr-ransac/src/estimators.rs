@@ -64,10 +64,11 @@ pub struct EstimatorOptions {
     pub scoring: ScoringKind,
     /// Weight λ (px²) of the affine residual in scoring; `Some(0.0)`: points only. `None`
     /// (default), for the fundamental matrix and the relative pose when the data carry A:
-    /// [`DEFAULT_AFFINE_WEIGHT`], or the lower weight that the data show A's noise to allow
-    /// (measured on the inliers of a first run, which is then run again with it), falling back
-    /// to 0 when A is too poor ([`DEFAULT_AFFINE_FALLBACK`]); 0 otherwise (H, points). The
-    /// weight used is [`Estimate::affine_weight`]. See each problem's module for its units.
+    /// [`DEFAULT_AFFINE_WEIGHT`], falling back to 0 when that shows A too poor
+    /// ([`DEFAULT_AFFINE_FALLBACK`]), else the lower weight that the data show A's noise to
+    /// allow (measured on the inliers of the first run, which is then run again with it); 0
+    /// otherwise (H, points). The weight used is [`Estimate::affine_weight`]. See each
+    /// problem's module for its units.
     pub affine_weight: Option<f64>,
     /// Per-AC confidence in [0, 1] of the affine part ((N, 8) data only): it scales each AC's
     /// affine term in scoring (with `affine_weight`) and in the refinements (with
@@ -112,8 +113,9 @@ fn epipolar_affine_weight(data: &Correspondences, opts: &EstimatorOptions) -> (f
 /// inliers of `first` (the estimate scored with [`DEFAULT_AFFINE_WEIGHT`]) under its pixel F,
 /// when it is below that weight; `None` otherwise (or when too few ACs carry a confidence).
 ///
-/// Why: the fixed weight assumes A accurate to about a tenth of the point noise per 10 px. ACs
-/// noisier than that (learned A on blurred, texture-poor walls) make λ·SD_A exceed the
+/// Why: λ = σ_P²/σ_A², so the fixed weight assumes that A's noise, carried over √50 ≈ 7 px,
+/// is no larger than the points' (A to about 12% at 0.5 px; docs/estimation.md). ACs noisier
+/// than that (learned A on blurred, texture-poor walls) make λ·SD_A exceed the
 /// threshold for true inliers, and the affine-scored model drops 3–10% of the point inliers.
 /// Scoring at λ̂ weighs each AC's affine part as much as its noise allows, like the final
 /// refinement does; where A is as accurate as assumed or better (λ̂ ≥ the default), nothing
@@ -315,16 +317,20 @@ pub fn estimate_fundamental(
         FundamentalProblem::new(data, kind, w, opts.ransac.threshold)
             .with_affine_confidence(opts.affine_confidence.as_deref())
     };
-    let mut est = run(&problem(weight, kind), opts, ScoringKind::Msac)?;
+    let est = run(&problem(weight, kind), opts, ScoringKind::Msac)?;
     if !default {
         return Ok(est);
+    }
+    // The fallback judges the run at the default weight (as for the relative pose).
+    if let Some(p) = points_fallback(&problem(0.0, SampleKind::Points), &est, opts) {
+        return Ok(p);
     }
     if let Some(w) = measured_affine_weight(data, &est.model, &est.inliers, opts)
         && let Ok(again) = run(&problem(w, kind), opts, ScoringKind::Msac)
     {
-        est = again;
+        return Ok(again);
     }
-    Ok(points_fallback(&problem(0.0, SampleKind::Points), &est, opts).unwrap_or(est))
+    Ok(est)
 }
 
 /// Robust relative pose X2 = R X1 + t (|t| = 1) from pixel correspondences and intrinsics.
@@ -353,19 +359,20 @@ pub fn estimate_relative_pose(
     };
     let mut problem = make(weight, kind);
     let mut est = run(&problem, opts, ScoringKind::Msac)?;
-    if default
-        && let Some(w) = measured_affine_weight(data, &est.model.fundamental, &est.inliers, opts)
-    {
-        let again = make(w, kind);
-        if let Ok(e) = run(&again, opts, ScoringKind::Msac) {
-            (est, problem) = (e, again);
-        }
-    }
     if default {
+        // The fallback judges the run at the default weight: a lower weight keeps the
+        // inliers of an A too poor to score with, which points serve better (module docs).
         let points = make(0.0, SampleKind::Points);
         if let Some(p) = points_fallback(&points, &est, opts) {
             est = p;
             problem = points;
+        } else if let Some(w) =
+            measured_affine_weight(data, &est.model.fundamental, &est.inliers, opts)
+        {
+            let again = make(w, kind);
+            if let Ok(e) = run(&again, opts, ScoringKind::Msac) {
+                (est, problem) = (e, again);
+            }
         }
     }
     let idx: Vec<usize> = (0..data.len()).filter(|&i| est.inliers[i]).collect();
