@@ -48,10 +48,11 @@ def use_openblas() -> None:
 def _key(pair, name: str, max_keypoints: int) -> Path:
     h = hashlib.sha1(pair.img1.tobytes() + pair.img2.tobytes()).hexdigest()[:10]
     folder = CACHE / "matches" / f"v{MATCHES_VERSION}" / f"{pair.id}-{h}"
-    shape = ""
+    # affcorr's matches depend on its shape model and on its pipeline's code too.
+    tag = ""
     if name == "affcorr":
-        shape = f"-shape{matchers.shape_model_tag()}-p{AFFCORR_PIPELINE_REVISION}"
-    return folder / f"{name}-k{max_keypoints}{shape}.npz"
+        tag = f"-shape{matchers.shape_model_tag()}-p{AFFCORR_PIPELINE_REVISION}"
+    return folder / f"{name}-k{max_keypoints}{tag}.npz"
 
 
 def matches(name: str, pair, max_keypoints: int) -> matchers.Matches:

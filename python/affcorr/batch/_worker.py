@@ -283,9 +283,13 @@ def shipped_models_dir(files: dict[str, bytes], root: Path | None = None) -> Pat
         if path.is_file() and path.stat().st_size == len(data) and path.read_bytes() == data:
             continue
         fd, partial = tempfile.mkstemp(dir=folder, prefix=f".{name}.")
-        with os.fdopen(fd, "wb") as handle:
-            handle.write(data)
-        os.replace(partial, path)
+        try:
+            with os.fdopen(fd, "wb") as handle:
+                handle.write(data)
+            os.replace(partial, path)
+        except BaseException:
+            Path(partial).unlink(missing_ok=True)  # a full disk leaves no partial file behind
+            raise
     return folder
 
 
