@@ -462,17 +462,20 @@ pub fn cascade_steps() -> Vec<Step> {
             .into_iter()
             .flat_map(move |r| tilts(image, t, n).map(move |v| v.with_other_rotation(r)))
     };
+    // Tiles of `image` magnified by `scale` (each 1/`scale` of its side), at every pair of
+    // `starts` (fractions; x and y), against the other image zoomed by `other_scale`.
+    let tile_grid = |image, scale: f64, starts: [f64; 3], other_scale| {
+        starts.into_iter().flat_map(move |y0| {
+            starts
+                .into_iter()
+                .map(move |x0| ViewSpec::tile(image, scale, x0, y0, 1.0 / scale, other_scale))
+        })
+    };
     // Strong zooms (4–8×): the zoomed image's content is a small part of the other, where
     // the other's keypoint budget barely lands. Half-size tiles of that image, magnified by 2
     // and overlapping by half (so that any part up to a quarter of the image's side lies
     // inside one), meet the zoomed image shrunk by ½.
-    let tiles = |image| {
-        [0.25, 0.0, 0.5].into_iter().flat_map(move |y0| {
-            [0.25, 0.0, 0.5]
-                .into_iter()
-                .map(move |x0| ViewSpec::tile(image, 2.0, x0, y0, 0.5, 0.5))
-        })
-    };
+    let tiles = |image| tile_grid(image, 2.0, [0.25, 0.0, 0.5], 0.5);
     // Tilt 2 first (with the other image rotated it solved every 80° tilt of experiment 4
     // outright or through its refinement), then the tiles, then tilt 4: each screened group
     // costs its extractions, and a zoom pair's cheap plain pass leaves the tiles a small
@@ -487,13 +490,7 @@ pub fn cascade_steps() -> Vec<Step> {
     // size tiles magnified by 3 give it a quarter of them (and more where it sits inside one)
     // and meet the zoomed image as it is (its features are the plain pass's): 2× apart,
     // within the matcher's range.
-    let third_tiles = |image| {
-        [1.0 / 3.0, 0.0, 2.0 / 3.0].into_iter().flat_map(move |y0| {
-            [1.0 / 3.0, 0.0, 2.0 / 3.0]
-                .into_iter()
-                .map(move |x0| ViewSpec::tile(image, 3.0, x0, y0, 1.0 / 3.0, 1.0))
-        })
-    };
+    let third_tiles = |image| tile_grid(image, 3.0, [1.0 / 3.0, 0.0, 2.0 / 3.0], 1.0);
     // The tiles of both images in one group each: which image is the zoomed one is not
     // known, and the screen ranks the 18 views together, so that the right tile of either
     // image runs before the other image's tiles are reached. The half-size tiles first: with
