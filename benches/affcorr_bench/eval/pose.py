@@ -84,8 +84,9 @@ LOCAL = {"affcorr-AC-min200": dict(min_iterations=200)}
 #: estimates carry it, so bumping it re-runs affcorr's rows and keeps the peers' (the cache holds
 #: no build hash; an installed wheel has none to give).
 # 2: λ of the affine terms from at most 512 inliers; 3: scoring at the measured λ̂; 4: only
-# after the fallback check at the default weight.
-AFFCORR_ESTIMATOR_REVISION = 4
+# after the fallback check at the default weight; 5: the measured λ̂ polishes the first
+# model instead of sampling again.
+AFFCORR_ESTIMATOR_REVISION = 5
 LABELS = {
     "opencv-USAC_MAGSAC": "OpenCV USAC_MAGSAC (5pt)",
     "poselib": "PoseLib (5pt)",

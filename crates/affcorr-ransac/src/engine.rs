@@ -107,6 +107,19 @@ pub fn check_options(o: &RansacOptions) -> Result<()> {
     Ok(())
 }
 
+/// The problem's size and sample size, when it has enough data for one sample.
+fn check_size<P: Problem>(problem: &P) -> Result<(usize, usize)> {
+    let (n, m) = (problem.len(), problem.sample_size());
+    if n < m {
+        return Err(RansacError::NotEnoughData {
+            what: "corrs",
+            needed: m,
+            got: n,
+        });
+    }
+    Ok((n, m))
+}
+
 /// Robustly fits `problem`'s model with `sampler` and `scoring`.
 pub fn estimate<P, Sa, Sc>(
     problem: &P,
@@ -120,32 +133,14 @@ where
     Sc: Scoring,
 {
     check_options(options)?;
-    let n = problem.len();
-    let m = problem.sample_size();
-    if n < m {
-        return Err(RansacError::NotEnoughData {
-            what: "corrs",
-            needed: m,
-            got: n,
-        });
-    }
+    let (n, m) = check_size(problem)?;
     let mut rng = Pcg64::seed_from_u64(options.seed);
     let mut sample = vec![0usize; m];
     let mut models: Vec<P::Model> = Vec::with_capacity(16);
     let mut scratch = Scratch::new(n);
     let (mut lo_indices, mut lo_weights) = (Vec::with_capacity(n), Vec::with_capacity(n));
     let lo = options.local_optimization;
-    let mut graph = match (lo, options.lo) {
-        (true, LoKind::GraphCut) => {
-            let (x1, x2) = problem.positions().ok_or(RansacError::InvalidOption {
-                name: "lo",
-                value: "graph_cut".into(),
-                reason: "graph-cut local optimisation needs data with positions",
-            })?;
-            Some(LoGraph::new(x1, x2, n))
-        }
-        _ => None,
-    };
+    let mut graph = lo_graph(problem, options)?;
     // With local optimisation, a hypothesis is worth verifying if it explains data at the
     // LO trigger's wide threshold (see `promising` below); the SPRT tests consistency there.
     let mut sprt = options.sprt.then(|| {
@@ -265,7 +260,102 @@ where
         }
     }
 
-    let mut best = best.ok_or(RansacError::NoModel { iterations })?;
+    let best = best.ok_or(RansacError::NoModel { iterations })?;
+    let rejections = sprt.map_or(0, |s| s.rejections);
+    let counts = Counts(iterations, lo_runs, rejections);
+    Ok(finish(
+        problem,
+        scoring,
+        options,
+        best,
+        &mut scratch,
+        counts,
+    ))
+}
+
+/// Polishes a known model of `problem` without drawing samples: scores `start`, runs local
+/// optimisation from it (when `options` ask for it) and the final refinement, as [`estimate`]
+/// does with its best sample's model.
+///
+/// For a second look at the same data under a changed score (the measured affine weight of
+/// [`crate::estimators::EstimatorOptions::affine_weight`]): the first run's model is already in
+/// the right basin, and local optimisation's widening threshold schedule re-collects the data
+/// that the new score admits, where a second run would draw every sample again.
+pub fn polish<P, Sc>(
+    problem: &P,
+    scoring: &Sc,
+    start: P::Model,
+    options: &RansacOptions,
+) -> Result<Estimate<P::Model>>
+where
+    P: Problem,
+    Sc: Scoring,
+{
+    check_options(options)?;
+    let (n, m) = check_size(problem)?;
+    let mut scratch = Scratch::new(n);
+    let (mut lo_indices, mut lo_weights) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut graph = lo_graph(problem, options)?;
+    let e = score_model(problem, scoring, &start, 0.0, usize::MAX, &mut scratch)
+        .ok_or(RansacError::NoModel { iterations: 0 })?;
+    let mut best = Scored {
+        model: start,
+        score: e.score,
+        inliers: e.inliers,
+        wide_support: e.wide_support,
+    };
+    let mut lo_runs = 0;
+    if options.local_optimization && best.wide_support > m {
+        lo_runs = 1;
+        best = local_optimization(
+            problem,
+            scoring,
+            best,
+            options,
+            &mut scratch,
+            graph.as_mut(),
+            &mut lo_indices,
+            &mut lo_weights,
+        );
+    }
+    Ok(finish(
+        problem,
+        scoring,
+        options,
+        best,
+        &mut scratch,
+        Counts(0, lo_runs, 0),
+    ))
+}
+
+/// The graph of graph-cut local optimisation, when `options` ask for it (it needs positions).
+fn lo_graph<P: Problem>(problem: &P, options: &RansacOptions) -> Result<Option<LoGraph>> {
+    if !(options.local_optimization && options.lo == LoKind::GraphCut) {
+        return Ok(None);
+    }
+    let (x1, x2) = problem.positions().ok_or(RansacError::InvalidOption {
+        name: "lo",
+        value: "graph_cut".into(),
+        reason: "graph-cut local optimisation needs data with positions",
+    })?;
+    Ok(Some(LoGraph::new(x1, x2, problem.len())))
+}
+
+/// What a search counted, for its [`Estimate`]: iterations, local optimisations, SPRT
+/// rejections.
+struct Counts(usize, usize, usize);
+
+/// The final refinement of `best` (when `options` ask for it) and the estimate it gives.
+fn finish<P: Problem, Sc: Scoring>(
+    problem: &P,
+    scoring: &Sc,
+    options: &RansacOptions,
+    mut best: Scored<P::Model>,
+    scratch: &mut Scratch<P::Model>,
+    Counts(iterations, lo_runs, sprt_rejections): Counts,
+) -> Estimate<P::Model> {
+    let m = problem.sample_size();
+    let (lo_indices, lo_weights) = (&mut Vec::new(), &mut Vec::new());
     let mut refinements = 0;
     if options.final_refinement {
         // Refine on the inliers, then again on the refined model's inliers while that set
@@ -288,11 +378,11 @@ where
                 scoring,
                 &best.model,
                 1.0,
-                &mut scratch,
-                &mut lo_indices,
-                &mut lo_weights,
+                scratch,
+                lo_indices,
+                lo_weights,
             );
-            if lo_indices.len() < m || lo_indices == previous {
+            if lo_indices.len() < m || *lo_indices == previous {
                 break;
             }
             // The affine refinement first; if its model scores too low on the point
@@ -303,7 +393,7 @@ where
             for &with_affine in attempts {
                 let Some(refined) = problem.refine(
                     &best.model,
-                    &lo_indices,
+                    lo_indices,
                     // The scoring's own cost: the refined model optimises what the score
                     // measures.
                     &scoring.refinement_loss(),
@@ -317,15 +407,9 @@ where
                     continue;
                 };
                 let to_beat = if with_affine { floor } else { best.score };
-                if let Some(e) = score_model(
-                    problem,
-                    scoring,
-                    &refined,
-                    to_beat,
-                    usize::MAX,
-                    &mut scratch,
-                )
-                .filter(|e| e.score > to_beat)
+                if let Some(e) =
+                    score_model(problem, scoring, &refined, to_beat, usize::MAX, scratch)
+                        .filter(|e| e.score > to_beat)
                 {
                     scratch.keep(&refined);
                     best = Scored {
@@ -342,11 +426,11 @@ where
             if !improved {
                 break;
             }
-            std::mem::swap(&mut previous, &mut lo_indices);
+            std::mem::swap(&mut previous, lo_indices);
         }
     }
-    let inliers = inlier_mask(problem, scoring, &best.model, &mut scratch);
-    Ok(Estimate {
+    let inliers = inlier_mask(problem, scoring, &best.model, scratch);
+    Estimate {
         num_inliers: inliers.iter().filter(|&&b| b).count(),
         model: best.model,
         inliers,
@@ -355,9 +439,9 @@ where
         lo_runs,
         refinements,
         residual_evaluations: scratch.evaluations,
-        sprt_rejections: sprt.map_or(0, |s| s.rejections),
+        sprt_rejections,
         affine_weight: problem.scoring_affine_weight(),
-    })
+    }
 }
 
 /// Levenberg–Marquardt steps of the final refinement.
@@ -518,6 +602,54 @@ mod tests {
         assert!(est.lo_runs >= 1);
         // The adaptive bound stopped the loop long before max_iterations.
         assert!(est.iterations < 500, "{}", est.iterations);
+    }
+
+    #[test]
+    fn polishing_a_rough_model_reaches_the_sampled_estimate_without_samples() {
+        let (line, truth) = noisy_line(2000, 0.7, 3);
+        let opts = RansacOptions {
+            threshold: 0.3,
+            ..Default::default()
+        };
+        let scoring = Msac::new(0.3);
+        let sampled = estimate(&line, &mut UniformSampler, &scoring, &opts).unwrap();
+        // Off by 0.05 in slope (0.5 at the ends of the data): a third of the inliers at the
+        // threshold, and LO's widening schedule brings in the rest.
+        let polished = polish(&line, &scoring, (2.05, -1.0), &opts).unwrap();
+        assert_eq!(polished.iterations, 0);
+        assert_eq!(polished.lo_runs, 1);
+        assert!(
+            (polished.model.0 - sampled.model.0).abs() < 1e-3
+                && (polished.model.1 - sampled.model.1).abs() < 1e-3,
+            "{:?} against {:?}",
+            polished.model,
+            sampled.model
+        );
+        let recall = |inliers: &[bool]| {
+            truth
+                .iter()
+                .zip(inliers)
+                .filter(|(t, e)| **t && **e)
+                .count()
+        };
+        assert!(recall(&polished.inliers) + 5 >= recall(&sampled.inliers));
+        // Nothing explained: no model, and the options are checked as `estimate` checks them.
+        let r = polish(&line, &scoring, (0.0, 1e6), &opts);
+        assert!(
+            matches!(r, Err(RansacError::NoModel { iterations: 0 })),
+            "{r:?}"
+        );
+        let bad = RansacOptions {
+            threshold: -1.0,
+            ..Default::default()
+        };
+        assert!(matches!(
+            polish(&line, &scoring, (2.0, -1.0), &bad),
+            Err(RansacError::InvalidOption {
+                name: "threshold",
+                ..
+            })
+        ));
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! otherwise), build the sampler and scoring from [`EstimatorOptions`], and run
 //! [`crate::engine::estimate`].
 
-use crate::engine::{Estimate, estimate};
+use crate::engine::{Estimate, estimate, polish};
 use crate::error::{RansacError, Result};
 use crate::local_opt::LO_SCHEDULE;
 use crate::options::RansacOptions;
@@ -133,6 +133,56 @@ fn measured_affine_weight(
     (lambda < DEFAULT_AFFINE_WEIGHT).then_some(lambda)
 }
 
+/// The default affine weight's second look at `first`, the estimate scored at
+/// [`DEFAULT_AFFINE_WEIGHT`] (pixel F `f`, samples of `kind`) of the problem that
+/// `at(weight, kind)` builds:
+/// - the points-scored estimate, when A proves too poor to score with ([`points_fallback`]);
+///   judged on `first`, since a lower weight keeps the inliers of such A;
+/// - else `first` polished at the weight measured on its inliers ([`measured_affine_weight`])
+///   when that is lower: scored at it, locally optimised and refined ([`polish`]), not sampled
+///   again; it reports the work of both passes;
+/// - else `first`.
+fn settle_default_weight<P: Problem>(
+    first: Estimate<P::Model>,
+    f: &Mat3,
+    data: &Correspondences,
+    kind: SampleKind,
+    at: impl Fn(f64, SampleKind) -> P,
+    opts: &EstimatorOptions,
+) -> Estimate<P::Model> {
+    if let Some(p) = points_fallback(&at(0.0, SampleKind::Points), &first, opts) {
+        return p;
+    }
+    let Some(w) = measured_affine_weight(data, f, &first.inliers, opts) else {
+        return first;
+    };
+    let polished = match scoring_of(opts, ScoringKind::Msac) {
+        ScoringKind::Magsac => polish(
+            &at(w, kind),
+            &MagsacPlusPlus::new(opts.ransac.threshold),
+            first.model.clone(),
+            &opts.ransac,
+        ),
+        _ => polish(
+            &at(w, kind),
+            &Msac::new(opts.ransac.threshold),
+            first.model.clone(),
+            &opts.ransac,
+        ),
+    };
+    match polished {
+        Ok(mut e) => {
+            e.iterations += first.iterations;
+            e.lo_runs += first.lo_runs;
+            e.refinements += first.refinements;
+            e.residual_evaluations += first.residual_evaluations;
+            e.sprt_rejections += first.sprt_rejections;
+            e
+        }
+        Err(_) => first,
+    }
+}
+
 /// The number of data whose residual under `model` in `problem` is below `threshold`.
 fn explained<P: Problem>(problem: &P, model: &P::Model, threshold: f64) -> usize {
     let mut r = vec![0.0; problem.len()];
@@ -241,17 +291,21 @@ fn check_affine_confidence(c: Option<&[f64]>, data: &Correspondences) -> Result<
     Ok(())
 }
 
+/// The scoring that `opts` ask for, `auto` standing for [`ScoringKind::Auto`].
+fn scoring_of(opts: &EstimatorOptions, auto: ScoringKind) -> ScoringKind {
+    if opts.scoring == ScoringKind::Auto {
+        auto
+    } else {
+        opts.scoring
+    }
+}
+
 fn run<P: Problem>(
     problem: &P,
     opts: &EstimatorOptions,
     auto: ScoringKind,
 ) -> Result<Estimate<P::Model>> {
-    let scoring = if opts.scoring == ScoringKind::Auto {
-        auto
-    } else {
-        opts.scoring
-    };
-    match scoring {
+    match scoring_of(opts, auto) {
         ScoringKind::Auto | ScoringKind::Msac => {
             run_with(problem, &Msac::new(opts.ransac.threshold), opts)
         }
@@ -321,16 +375,8 @@ pub fn estimate_fundamental(
     if !default {
         return Ok(est);
     }
-    // The fallback judges the run at the default weight (as for the relative pose).
-    if let Some(p) = points_fallback(&problem(0.0, SampleKind::Points), &est, opts) {
-        return Ok(p);
-    }
-    if let Some(w) = measured_affine_weight(data, &est.model, &est.inliers, opts)
-        && let Ok(again) = run(&problem(w, kind), opts, ScoringKind::Msac)
-    {
-        return Ok(again);
-    }
-    Ok(est)
+    let f = est.model;
+    Ok(settle_default_weight(est, &f, data, kind, problem, opts))
 }
 
 /// Robust relative pose X2 = R X1 + t (|t| = 1) from pixel correspondences and intrinsics.
@@ -357,23 +403,13 @@ pub fn estimate_relative_pose(
         )
         .with_affine_confidence(opts.affine_confidence.as_deref())
     };
-    let mut problem = make(weight, kind);
+    // Every problem below shares the normalised data and the intrinsics; only the scoring
+    // weight and the sample kind differ.
+    let problem = make(weight, kind);
     let mut est = run(&problem, opts, ScoringKind::Msac)?;
     if default {
-        // The fallback judges the run at the default weight: a lower weight keeps the
-        // inliers of an A too poor to score with, which points serve better (module docs).
-        let points = make(0.0, SampleKind::Points);
-        if let Some(p) = points_fallback(&points, &est, opts) {
-            est = p;
-            problem = points;
-        } else if let Some(w) =
-            measured_affine_weight(data, &est.model.fundamental, &est.inliers, opts)
-        {
-            let again = make(w, kind);
-            if let Ok(e) = run(&again, opts, ScoringKind::Msac) {
-                (est, problem) = (e, again);
-            }
-        }
+        let f = est.model.fundamental;
+        est = settle_default_weight(est, &f, data, kind, make, opts);
     }
     let idx: Vec<usize> = (0..data.len()).filter(|&i| est.inliers[i]).collect();
     let (x1, x2): (Vec<_>, Vec<_>) = idx
