@@ -77,7 +77,7 @@ def test_the_cli_takes_the_view_options(tmp_path):
     args = cli.build_parser().parse_args(["match", "a.png", "b.png", "-o", "x.npz"])
     assert args.views == affcorr.PIPELINE_DEFAULTS["views"] == "auto"
     assert args.view_budget is None
-    assert args.view_relative_budget == affcorr.PIPELINE_DEFAULTS["view_relative_budget"] == 40
+    assert args.view_relative_budget == affcorr.PIPELINE_DEFAULTS["view_relative_budget"] == 30
     none = ["match", "a.png", "b.png", "-o", "x.npz", "--view-relative-budget", "none"]
     assert cli.build_parser().parse_args(none).view_relative_budget is None
     out = tmp_path / "h.json"
@@ -89,9 +89,9 @@ def test_the_cli_takes_the_view_options(tmp_path):
 
 
 def test_the_relative_budget_stops_the_cascade_of_a_pair_no_view_solves():
-    # Graffiti against noise: nothing verifies. A budget of a millionth of the plain pass is
-    # spent by the plain pair's verification, so no synthetic view starts; with max_views=2
-    # and no relative budget, exactly two are tried.
+    # Graffiti against noise: nothing verifies. A budget of a millionth of the plain pass's
+    # work is spent by the plain pair's verification, so no synthetic view starts; with
+    # max_views=2 and no relative budget, exactly two are tried, and each reports its work.
     a = affcorr.read_gray_image(GRAF / "graf1.png")
     noise = np.random.default_rng(0).random((480, 640), dtype=np.float32)
     tiny = affcorr.Pipeline(max_keypoints=512, threads=2, view_relative_budget=1e-6)
@@ -101,6 +101,10 @@ def test_the_relative_budget_stops_the_cascade_of_a_pair_no_view_solves():
     res = two.match_pair(a, noise)
     assert len(res.views) == 3 and not any(v["verified"] for v in res.views), res.views
     assert all(v["window"] is None and v["other_scale"] == 1.0 for v in res.views)
+    # The first view carries its group's screen (seven rotated images of B extracted), the
+    # zoom by ½ one image of a quarter of the pixels.
+    work = [v["work"] for v in res.views]
+    assert work[0] == 1.0 and work[1] > 2.0 and 0 < work[2] < 1.0, work
 
 
 def test_a_steep_tilt_of_a_rotated_pair_is_solved_through_a_screened_tilt_view():

@@ -145,7 +145,8 @@ type MatchTuple<'py> = (
 /// The view cascade's report: one dict per view tried (`label`, `image` "A" | "B" | None,
 /// `rotation` (rad), `scale`, `tilt`, `tilt_angle` (rad), `guided`, `window`, `other_scale`,
 /// `other_rotation` (rad), `matches`, `inliers`, `screen` (None unless ranked in a group),
-/// `verified`, `seconds`, and `used`: whether its ACs are the result's, `Matches::view`).
+/// `verified`, `seconds`, `work` (the relative budget's work it took, in plain passes) and
+/// `used`: whether its ACs are the result's, `Matches::view`).
 fn view_reports<'py>(py: Python<'py>, m: &Matches) -> PyResult<Bound<'py, PyList>> {
     let out = PyList::empty(py);
     let used = m.view();
@@ -172,6 +173,7 @@ fn view_reports<'py>(py: Python<'py>, m: &Matches) -> PyResult<Bound<'py, PyList
         d.set_item("verified", v.verified)?;
         d.set_item("screen", v.screen)?;
         d.set_item("seconds", v.time.as_secs_f64())?;
+        d.set_item("work", v.work)?;
         out.append(d)?;
     }
     Ok(out)

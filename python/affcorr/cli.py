@@ -181,8 +181,8 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
         "--view-relative-budget",
         type=lambda v: None if v.lower() == "none" else float(v),
         default=PIPELINE_DEFAULTS["view_relative_budget"],
-        help="the view cascade starts no new view once it has taken this many times the plain "
-        "pass ('none': no limit; default: %(default)s)",
+        help="the view cascade starts no new view once it has done this many times the plain "
+        "pass's work, counted, not timed ('none': no limit; default: %(default)s)",
     )
 
 

@@ -132,8 +132,10 @@ class MatchResult:
             ``other_rotation`` (radians; the other image's zoom and in-plane rotation),
             ``matches``, ``inliers``, ``verified``, ``screen`` (the view's rank score in a
             screened group of tilts or tiles, else None),
-            ``seconds``, ``used``: whether its ACs are the result's); empty when the cascade
-            did not run (``views="off"``, dense matchers).
+            ``seconds``, ``work`` (what it took from ``view_relative_budget``, in plain
+            passes: counted, not timed, so the same pair runs the same views on any machine),
+            ``used``: whether its ACs are the result's); empty when the cascade did not run
+            (``views="off"``, dense matchers).
     """
 
     corrs: NDArray[np.float64]
@@ -212,10 +214,11 @@ class Pipeline:
             the view's warp; ``"full"`` tries every view and keeps the best; ``"off"`` the
             plain pair only. Easy pairs cost one verification. See :attr:`MatchResult.views`.
         view_budget: seconds after which the cascade starts no new view (None: no limit).
-        view_relative_budget: the cascade starts no new view once it has taken this many
-            times the plain pass (the default: ``PIPELINE_DEFAULTS["view_relative_budget"]``;
-            None: no limit). It bounds what a pair that no view solves costs, on any machine
-            and image size.
+        view_relative_budget: the cascade starts no new view once it has done this many
+            times the plain pass's work (the default: ``PIPELINE_DEFAULTS["view_relative_budget"]``;
+            None: no limit). It bounds what a pair that no view solves costs, on any image
+            size; the work is counted (pixels extracted, keypoints matched, ACs made), not
+            timed, so which views run does not depend on the machine or its load.
         max_views: at most this many synthetic views (None: the default, 256).
         channel_order: ``"bgr"`` for ``cv2.imread`` arrays (files are decoded by their own
             format; torch tensors ``(C, H, W)`` are accepted).

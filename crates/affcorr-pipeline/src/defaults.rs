@@ -40,10 +40,12 @@ pub const VIEW_MIN_INLIERS: usize = 12;
 /// ... making up at least this share of the matches.
 pub const VIEW_MIN_INLIER_RATIO: f64 = 0.1;
 
-/// The view cascade starts no new view after this many times the plain pass: what a pair
-/// that no view solves costs at most (about ASIFT's cost over SIFT). Every pair a view solved
-/// in benches/results/views.md and benches/results/eval/extreme.md needed less.
-pub const VIEW_RELATIVE_BUDGET: Option<f64> = Some(40.0);
+/// The view cascade starts no new view after this many times the plain pass's work (counted,
+/// not timed: `views::WorkMeter`): what a pair that no view solves costs at most (about
+/// ASIFT's cost over SIFT; the counted work runs 1–2× short of the time it takes, column
+/// "max cost" against "max work" of benches/results/views.md). Every pair a view solved in
+/// benches/results/views.md and benches/results/eval/extreme.md needed less.
+pub const VIEW_RELATIVE_BUDGET: Option<f64> = Some(30.0);
 
 /// Guided re-matching (more matches around the verified ones, `crate::grow`).
 pub const GUIDED_MATCHING: bool = false;

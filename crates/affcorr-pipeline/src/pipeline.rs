@@ -32,8 +32,8 @@ use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
 use crate::views::{
     CONFIDENT_VIEW, REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec,
-    WEAK_RATIO, cascade_steps, guided_view, refinement_view, rival_views, screen, screen_run,
-    verified_fundamental, verify, weak_yield,
+    WEAK_RATIO, WorkMeter, cascade_steps, guided_view, refinement_view, rival_views, screen,
+    screen_run, verified_fundamental, verify, weak_yield,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -477,11 +477,8 @@ impl Pipeline {
             (plain, Vec::new())
         } else {
             let t = Instant::now();
-            // The plain pass: extraction of both images (cached or not) and their matching.
-            let plain_cost = start.elapsed() + fa.extraction_time() + fb.extraction_time();
             let r = self.view_cascade(
                 plain,
-                plain_cost,
                 [(work_a, &fa.matcher), (work_b, &fb.matcher)],
                 &mut timings,
             )?;
@@ -568,33 +565,46 @@ impl Pipeline {
         Ok(work)
     }
 
-    /// The features of one image's side of a view: the plain pass's (`plain`) when the view
-    /// leaves the image as it is, else those of its warp, extracted once per pair (`cache`);
-    /// `None` for a warp too small for the matcher. An extraction here is timed into
-    /// `timings` once; the matching of a view subtracts its features' extraction times.
-    fn warped_features(
+    /// The features of both sides of a view with `warps` (A's, B's): the plain pass's for a
+    /// side the view leaves as it is, else those of its warp, extracted once per pair
+    /// (`store`); `None` when a warp is too small for the matcher. An extraction here is timed
+    /// into `timings` and charged to the store's meter once; the matching of a view subtracts
+    /// its features' extraction times.
+    fn view_features(
         &self,
-        cache: &mut HashMap<WarpKey, Rc<ImageFeatures>>,
+        store: &mut ViewFeatures<'_>,
+        [a, b]: &[Option<(AffineWarp, usize, usize)>; 2],
+        timings: &mut Timings,
+    ) -> Result<Option<[Rc<ImageFeatures>; 2]>> {
+        let fa = self.side_features(store, 0, a, timings)?;
+        let fb = self.side_features(store, 1, b, timings)?;
+        Ok(fa.zip(fb).map(|(fa, fb)| [fa, fb]))
+    }
+
+    /// One side of [`Self::view_features`]: image `image` (0: A, 1: B) under `warp`.
+    fn side_features(
+        &self,
+        store: &mut ViewFeatures<'_>,
         image: usize,
-        img: &GrayImage,
         warp: &Option<(AffineWarp, usize, usize)>,
-        plain: &Rc<ImageFeatures>,
         timings: &mut Timings,
     ) -> Result<Option<Rc<ImageFeatures>>> {
         let (Some((w, vw, vh)), Some(key)) = (warp, warp_key(image, warp)) else {
-            return Ok(Some(plain.clone()));
+            return Ok(Some(store.plain[image].clone()));
         };
-        if let Some(hit) = cache.get(&key) {
+        if let Some(hit) = store.cache.get(&key) {
             return Ok(Some(hit.clone()));
         }
         if (*vw).min(*vh) < 32 {
             return Ok(None);
         }
-        let f = Rc::new(self.matcher.extract(&warp_image(img, w, *vw, *vh)?, None)?);
+        let view = warp_image(store.images[image], w, *vw, *vh)?;
+        let f = Rc::new(self.matcher.extract(&view, None)?);
+        store.meter.extraction(vw * vh);
         timings.decode += f.timings.preprocess;
         timings.matcher += f.timings.network;
         timings.detection += f.timings.detection;
-        cache.insert(key, f.clone());
+        store.cache.insert(key, f.clone());
         Ok(Some(f))
     }
 
@@ -667,16 +677,22 @@ impl Pipeline {
     fn view_cascade(
         &self,
         plain: WorkMatches,
-        plain_cost: Duration,
         [(work_a, features_a), (work_b, features_b)]: [(&GrayImage, &ImageFeatures); 2],
         timings: &mut Timings,
     ) -> Result<(WorkMatches, Vec<ViewReport>)> {
         let o = &self.views;
         let start = Instant::now();
+        // The plain pass's work: both extractions, their matching and its ACs.
+        let mut meter = WorkMeter::new(
+            work_a.width() * work_a.height() + work_b.width() * work_b.height(),
+            (features_a.len(), features_b.len()),
+            plain.corrs.len(),
+        );
         let passes = |inliers: usize, n: usize| {
             inliers >= o.min_inliers && inliers as f64 >= o.min_inlier_ratio * n as f64
         };
         let (inliers, mask) = verify(&plain.corrs)?;
+        meter.verification();
         let verified = passes(inliers, plain.corrs.len());
         let mut reports = vec![ViewReport {
             view: ViewSpec::PLAIN,
@@ -685,8 +701,12 @@ impl Pipeline {
             verified,
             screen: None,
             time: start.elapsed(),
+            work: 1.0,
             used: false,
         }];
+        // The meter's reading at the last report (the plain pass's verification is the plain
+        // pass's): a view's work is what was spent since.
+        let mut reported = meter.spent;
         // A weak verification (few of the matches agree) may be a repetitive pattern matched
         // at the wrong rotation: the rotated views are its rivals (see `views::WEAK_RATIO`).
         // So may one verified by few inliers (`views::WEAK_YIELD`).
@@ -743,12 +763,16 @@ impl Pipeline {
         );
         // Views share warps (the tilts of A against B's rotations, the tiles against one zoom
         // of the other image): each warped image's features are extracted once per pair.
-        let mut cache: HashMap<WarpKey, Rc<ImageFeatures>> = HashMap::new();
-        let (plain_a, plain_b) = (Rc::new(features_a.clone()), Rc::new(features_b.clone()));
+        let mut store = ViewFeatures {
+            images: [work_a, work_b],
+            plain: [Rc::new(features_a.clone()), Rc::new(features_b.clone())],
+            cache: HashMap::new(),
+            meter,
+        };
         // The time a group's screen took, counted in the first view it runs.
         let mut screen_time = Duration::ZERO;
         loop {
-            if tried >= o.max_views || !o.within_budget(start.elapsed(), plain_cost) {
+            if tried >= o.max_views || !o.within_budget(start.elapsed(), &store.meter) {
                 break;
             }
             let (view, screen_score) = if let Some(v) = queue.pop_front() {
@@ -761,17 +785,12 @@ impl Pipeline {
                         let t = Instant::now();
                         let mut scored = Vec::with_capacity(group.len());
                         for v in group {
-                            let [a_warp, b_warp] = v.warps(sizes.0, sizes.1);
-                            let (Some(fa), Some(fb)) = (
-                                self.warped_features(
-                                    &mut cache, 0, work_a, &a_warp, &plain_a, timings,
-                                )?,
-                                self.warped_features(
-                                    &mut cache, 1, work_b, &b_warp, &plain_b, timings,
-                                )?,
-                            ) else {
+                            let warps = v.warps(sizes.0, sizes.1);
+                            let Some([fa, fb]) = self.view_features(&mut store, &warps, timings)?
+                            else {
                                 continue;
                             };
+                            store.meter.screen((fa.len(), fb.len()));
                             scored.push((v, Some(screen(&fa, &fb)?)));
                         }
                         // Best first (stable: ties keep the steps' order).
@@ -808,11 +827,9 @@ impl Pipeline {
             };
             tried += 1;
             let t = Instant::now();
-            let [a_warp, b_warp] = view.warps(sizes.0, sizes.1);
-            let (Some(fa), Some(fb)) = (
-                self.warped_features(&mut cache, 0, work_a, &a_warp, &plain_a, timings)?,
-                self.warped_features(&mut cache, 1, work_b, &b_warp, &plain_b, timings)?,
-            ) else {
+            let warps = view.warps(sizes.0, sizes.1);
+            let [a_warp, b_warp] = warps;
+            let Some([fa, fb]) = self.view_features(&mut store, &warps, timings)? else {
                 // A view too small for the matcher is skipped, not an error of the pair.
                 continue;
             };
@@ -831,6 +848,7 @@ impl Pipeline {
             let (va, vb) = (warped(work_a, &a_warp)?, warped(work_b, &b_warp)?);
             let (va, vb) = (va.as_ref().unwrap_or(work_a), vb.as_ref().unwrap_or(work_b));
             let m = self.match_working(va, vb, raw, timings)?;
+            store.meter.matching((fa.len(), fb.len()), m.corrs.len());
             let (wa, wb) = (
                 a_warp.map_or(AffineWarp::IDENTITY, |w| w.0),
                 b_warp.map_or(AffineWarp::IDENTITY, |w| w.0),
@@ -841,6 +859,7 @@ impl Pipeline {
                 .filter_map(|row| ac_from_views(row, &wa, &wb))
                 .collect();
             let (inliers, mask) = verify(&corrs)?;
+            store.meter.verification();
             let verified = passes(inliers, corrs.len());
             let agreeing: Vec<[f64; 8]> = corrs
                 .iter()
@@ -870,8 +889,10 @@ impl Pipeline {
                 verified,
                 screen: screen_score,
                 time: t.elapsed() + std::mem::take(&mut screen_time),
+                work: (store.meter.spent - reported) / store.meter.plain,
                 used: false,
             });
+            reported = store.meter.spent;
             let better = verified && inliers > best_inliers && inliers >= rival_floor;
             if better {
                 best_index = reports.len() - 1;
@@ -902,8 +923,23 @@ impl Pipeline {
             }
         }
         reports[best_index].used = true;
+        tracing::debug!(
+            views = reports.len() - 1,
+            plain_passes = store.meter.passes(),
+            "view cascade's work"
+        );
         Ok((best, reports))
     }
+}
+
+/// The features of a pair's synthetic views: the working images and their plain features, the
+/// warped images' features (each extracted once per pair) and the cascade's work meter that
+/// the extractions are charged to.
+struct ViewFeatures<'a> {
+    images: [&'a GrayImage; 2],
+    plain: [Rc<ImageFeatures>; 2],
+    cache: HashMap<WarpKey, Rc<ImageFeatures>>,
+    meter: WorkMeter,
 }
 
 /// The features of the images of a batch ([`Pipeline::match_pairs`]), each extracted once

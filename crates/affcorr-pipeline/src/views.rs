@@ -155,9 +155,11 @@ pub struct ViewOptions {
     pub mode: ViewMode,
     /// Stop starting views after this much time in the cascade (`None`: no limit).
     pub time_budget: Option<Duration>,
-    /// Stop starting views once the cascade has taken this many times the plain pass
-    /// (`None`: no limit). Unlike [`Self::time_budget`] it scales with the machine, the image
-    /// size and the keypoint budget, and bounds what a pair that no view solves costs.
+    /// Stop starting views once the cascade has done this many times the plain pass's work
+    /// (`None`: no limit). Unlike [`Self::time_budget`] it scales with the image size and the
+    /// keypoint budget, bounds what a pair that no view solves costs, and is counted, not
+    /// timed (nominal costs of each extraction, matching, screen, verification and AC): which
+    /// views run does not depend on the machine or its load.
     pub relative_budget: Option<f64>,
     /// At most this many synthetic views.
     pub max_views: usize,
@@ -181,13 +183,13 @@ impl Default for ViewOptions {
 }
 
 impl ViewOptions {
-    /// Whether the cascade, `elapsed` into its views after a plain pass of `plain`, may start
-    /// another view.
-    pub(crate) fn within_budget(&self, elapsed: Duration, plain: Duration) -> bool {
+    /// Whether the cascade, `elapsed` into its views, having spent the work in `meter`, may
+    /// start another view.
+    pub(crate) fn within_budget(&self, elapsed: Duration, meter: &WorkMeter) -> bool {
         self.time_budget.is_none_or(|b| elapsed < b)
             && self
                 .relative_budget
-                .is_none_or(|k| elapsed.as_secs_f64() < k * plain.as_secs_f64())
+                .is_none_or(|k| meter.spent < k * meter.plain)
     }
 
     pub(crate) fn validate(&self) -> Result<()> {
@@ -215,6 +217,79 @@ impl ViewOptions {
             ));
         }
         Ok(())
+    }
+}
+
+/// The work of the cascade, counted in nominal milliseconds of the default matcher (XFeat +
+/// LighterGlue at 1024 keypoints, 2 threads: benches/results/pipeline_timing.md), so that the
+/// relative budget ([`ViewOptions::relative_budget`]) does not depend on the machine or its
+/// load: the same pair runs the same views anywhere. Each stage is charged by what its time
+/// grows with: an extraction by its pixels, a matching (and a screen) by the product of the two
+/// sides' keypoints, the ACs (patches, shape network, refinement) by their number; a
+/// verification is a fixed cost.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct WorkMeter {
+    /// The plain pass's work: both extractions, their matching and its ACs.
+    pub(crate) plain: f64,
+    /// The cascade's work so far.
+    pub(crate) spent: f64,
+}
+
+/// Nominal cost of extracting features from a megapixel (a VGA image in about 100 ms).
+const EXTRACTION_PER_MEGAPIXEL: f64 = 330.0;
+/// Nominal cost of matching per million keypoint pairs (1024 × 1024 in about 230 ms).
+const MATCHING_PER_MEGAPAIR: f64 = 220.0;
+/// Nominal cost of one AC: its patches, the shape network and the affine refinement.
+const PER_AC: f64 = 0.6;
+/// A screen (mutual nearest neighbours and a homography) costs this share of a matching.
+const SCREEN_SHARE: f64 = 0.05;
+/// Nominal cost of a verification (a fundamental matrix by RANSAC on the ACs): the
+/// pipeline's `views` stage of an easy pair (benches/results/pipeline_timing.md).
+const VERIFICATION: f64 = 2.0;
+
+impl WorkMeter {
+    /// The meter of a cascade after a plain pass on images of `pixels` (both together) with
+    /// `keypoints` on each side, which gave `acs` ACs.
+    pub(crate) fn new(pixels: usize, keypoints: (usize, usize), acs: usize) -> Self {
+        Self {
+            plain: Self::extraction_cost(pixels)
+                + Self::matching_cost(keypoints)
+                + acs as f64 * PER_AC,
+            spent: 0.0,
+        }
+    }
+
+    fn extraction_cost(pixels: usize) -> f64 {
+        EXTRACTION_PER_MEGAPIXEL * pixels as f64 * 1e-6
+    }
+
+    fn matching_cost((a, b): (usize, usize)) -> f64 {
+        MATCHING_PER_MEGAPAIR * (a * b) as f64 * 1e-6
+    }
+
+    /// Charges the extraction of a warped image of `pixels`.
+    pub(crate) fn extraction(&mut self, pixels: usize) {
+        self.spent += Self::extraction_cost(pixels);
+    }
+
+    /// Charges the screen of a view with `keypoints` on each side.
+    pub(crate) fn screen(&mut self, keypoints: (usize, usize)) {
+        self.spent += SCREEN_SHARE * Self::matching_cost(keypoints);
+    }
+
+    /// Charges a verification (the plain pass's is the cascade's first work).
+    pub(crate) fn verification(&mut self) {
+        self.spent += VERIFICATION;
+    }
+
+    /// Charges the matching of a view with `keypoints` on each side, and its `acs` ACs.
+    pub(crate) fn matching(&mut self, keypoints: (usize, usize), acs: usize) {
+        self.spent += Self::matching_cost(keypoints) + acs as f64 * PER_AC;
+    }
+
+    /// The work so far in plain passes.
+    pub(crate) fn passes(&self) -> f64 {
+        self.spent / self.plain.max(f64::MIN_POSITIVE)
     }
 }
 
@@ -402,6 +477,10 @@ pub struct ViewReport {
     pub screen: Option<usize>,
     /// Wall time: warping, matching, ACs and verification.
     pub time: Duration,
+    /// The work it took from [`ViewOptions::relative_budget`], in plain passes (the plain
+    /// pass: 1): its extractions, its group's screen when it is the first of the group to run,
+    /// its matching and its ACs; counted, not timed.
+    pub work: f64,
     /// Whether its ACs are the result's (one view of a cascade; a verified view with the most
     /// inliers is not used when it fell short of a rival's margin, [`RIVAL_MARGIN`]).
     pub used: bool,
@@ -731,6 +810,145 @@ mod tests {
         assert!(labels.contains("B zoom 2 tile [0.5, 0.25; 1, 0.75] + A zoom 0.5"));
         assert!(labels.contains("A zoom 3 tile [0.33, 0; 0.67, 0.33]"));
         assert!(labels.contains("B zoom 3 tile [0, 0.67; 0.33, 1]"));
+    }
+
+    /// x2 = H x1 and A = ∂x2/∂x1 of a plane's homography `h` (row-major).
+    fn plane_ac(h: &[f64; 9], x: [f64; 2]) -> [f64; 8] {
+        let w = h[6] * x[0] + h[7] * x[1] + h[8];
+        let u = (h[0] * x[0] + h[1] * x[1] + h[2]) / w;
+        let v = (h[3] * x[0] + h[4] * x[1] + h[5]) / w;
+        let a = [
+            (h[0] - u * h[6]) / w,
+            (h[1] - u * h[7]) / w,
+            (h[3] - v * h[6]) / w,
+            (h[4] - v * h[7]) / w,
+        ];
+        [x[0], x[1], u, v, a[0], a[1], a[2], a[3]]
+    }
+
+    fn mul2(p: &[f64; 4], q: &[f64; 4]) -> [f64; 4] {
+        [
+            p[0] * q[0] + p[1] * q[2],
+            p[0] * q[1] + p[1] * q[3],
+            p[2] * q[0] + p[3] * q[2],
+            p[2] * q[1] + p[3] * q[3],
+        ]
+    }
+
+    #[test]
+    fn every_view_maps_plane_acs_back_exactly_and_magnified_tiles_show_their_window() {
+        use affcorr_image::{GrayImage, ac_from_views, warp_image};
+        let (w, h) = (640usize, 480usize);
+        // A smooth texture (periods of 60-90 px), so that bilinear sampling is near exact.
+        let texture = |x: f64, y: f64| ((x / 13.0).sin() * (y / 11.0).cos() + 1.0) as f32 * 0.5;
+        let data = (0..w * h)
+            .map(|i| texture((i % w) as f64, (i / w) as f64))
+            .collect();
+        let img = GrayImage::new(w, h, data).unwrap();
+        // A perspective plane between A and B (both w × h).
+        let plane = [0.9, 0.08, 25.0, -0.05, 1.1, 12.0, 1e-4, -6e-5, 1.0];
+        let mut tiles = 0;
+        for view in candidate_views() {
+            let label = view.label();
+            let [a_warp, b_warp] = view.warps((w, h), (w, h));
+            let wa = a_warp.map_or(AffineWarp::IDENTITY, |v| v.0);
+            let wb = b_warp.map_or(AffineWarp::IDENTITY, |v| v.0);
+            // An AC found between the views is the plane's AC seen through both warps:
+            // x1' = Wa x1, x2' = Wb x2, A' = Wb A Wa⁻¹. Mapped back, it is the plane's.
+            let ia = wa.inverse().unwrap();
+            for (gx, gy) in [(40.0, 30.0), (320.0, 240.0), (600.0, 400.0), (150.0, 420.0)] {
+                let truth = plane_ac(&plane, [gx, gy]);
+                let (p, q) = (wa.apply([gx, gy]), wb.apply([truth[2], truth[3]]));
+                let a = mul2(
+                    &mul2(&wb.m, &[truth[4], truth[5], truth[6], truth[7]]),
+                    &ia.m,
+                );
+                let row = [p[0], p[1], q[0], q[1], a[0], a[1], a[2], a[3]];
+                let back = ac_from_views(&row, &wa, &wb).unwrap();
+                for (got, want) in back.iter().zip(&truth) {
+                    assert!(
+                        (got - want).abs() < 1e-9,
+                        "{label}: {back:?} against {truth:?}"
+                    );
+                }
+            }
+            // A magnified tile shows its window of the image: its pixels are the image's at
+            // the warp's preimage, and they span the window's fraction of the image.
+            let (Some(window), ViewImage::A) = (view.window, view.image) else {
+                continue;
+            };
+            tiles += 1;
+            let (warp, vw, vh) = a_warp.unwrap();
+            let tile = warp_image(&img, &warp, vw, vh).unwrap();
+            let [x0, y0, x1, y1] = window;
+            let side = |lo: f64, hi: f64, n: usize| (hi - lo) * view.scale * n as f64;
+            assert!(
+                (vw as f64 - side(x0, x1, w)).abs() <= view.scale + 1.0,
+                "{label}: {vw}"
+            );
+            assert!(
+                (vh as f64 - side(y0, y1, h)).abs() <= view.scale + 1.0,
+                "{label}: {vh}"
+            );
+            let inv = warp.inverse().unwrap();
+            let corner = inv.apply([0.0, 0.0]);
+            assert!(
+                (corner[0] - x0 * w as f64).abs() <= 1.0
+                    && (corner[1] - y0 * h as f64).abs() <= 1.0,
+                "{label}: the tile starts at {corner:?}"
+            );
+            for (tx, ty) in [(5, 5), (vw / 2, vh / 3), (vw - 6, vh - 6)] {
+                let [u, v] = inv.apply([tx as f64, ty as f64]);
+                let (got, want) = (tile.get(tx, ty), texture(u, v));
+                assert!(
+                    (got - want).abs() < 0.01,
+                    "{label} at ({tx}, {ty}): {got} against {want}"
+                );
+            }
+        }
+        // The half-size tiles (9) and the third-size tiles (9) of A.
+        assert_eq!(tiles, 18);
+    }
+
+    #[test]
+    fn the_relative_budget_counts_work_not_time() {
+        // A VGA pair at 1024 keypoints with 300 ACs: about the default matcher's plain pass.
+        let mut meter = WorkMeter::new(2 * 640 * 480, (1024, 1024), 300);
+        let plain = meter.plain;
+        assert!((500.0..800.0).contains(&plain), "{plain}");
+        // A rotated view of B: its extraction (a VGA image), its screen, its matching and ACs.
+        meter.extraction(640 * 480);
+        meter.screen((1024, 1024));
+        meter.matching((1024, 1024), 300);
+        meter.verification();
+        let view = meter.spent;
+        assert!(view < plain && view > 0.6 * plain, "{view} of {plain}");
+        assert!((meter.passes() - view / plain).abs() < 1e-12);
+        // Fewer keypoints and ACs cost less; a quarter of the pixels a quarter of the work.
+        let mut small = WorkMeter::new(2 * 640 * 480, (1024, 1024), 300);
+        small.extraction(320 * 240);
+        small.matching((512, 1024), 30);
+        assert!(small.spent < 0.5 * view);
+        // The budget: k plain passes of work, whatever the time taken; an absolute time
+        // budget on top of it.
+        let o = ViewOptions {
+            relative_budget: Some(2.0),
+            ..Default::default()
+        };
+        let long = Duration::from_secs(3600);
+        assert!(o.within_budget(long, &meter));
+        meter.spent = 2.0 * plain;
+        assert!(!o.within_budget(Duration::ZERO, &meter));
+        let unbounded = ViewOptions {
+            relative_budget: None,
+            ..Default::default()
+        };
+        assert!(unbounded.within_budget(long, &meter));
+        let timed = ViewOptions {
+            time_budget: Some(Duration::from_secs(1)),
+            ..unbounded
+        };
+        assert!(!timed.within_budget(long, &meter));
     }
 
     #[test]

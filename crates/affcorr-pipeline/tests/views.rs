@@ -11,7 +11,7 @@ mod common;
 
 use affcorr_geom::{Mat3, Vec3};
 use affcorr_image::{AffineWarp, GrayImage, warp_image};
-use affcorr_pipeline::{Geometry, Pipeline, ViewMode, ViewOptions, ViewSpec};
+use affcorr_pipeline::{Geometry, Pipeline, ViewMode, ViewSpec};
 
 fn graffiti() -> (GrayImage, GrayImage, Mat3) {
     let dir = common::root().join("data/graffiti");
@@ -95,14 +95,18 @@ fn check_with(p: &Pipeline, a: &GrayImage, b: &GrayImage, gt: &Mat3, what: &str,
     aff.sort_by(f64::total_cmp);
     let median = aff[aff.len() / 2];
     let tried: Vec<String> = m.views.iter().map(|v| v.view.label()).collect();
+    let work: f64 = m.views.iter().map(|v| v.work).sum();
     eprintln!(
         "{what}: views off: corner error {off_err:.1} px; auto: {} via {:?} ({} inliers), \
-         corner error {err:.2} px, median A error {median:.4}, views tried {tried:?}, {:?}",
+         corner error {err:.2} px, median A error {median:.4}, views tried {tried:?}, {:?}, \
+         {work:.1} plain passes of work",
         m.len(),
         view.view.label(),
         est.estimate.num_inliers,
         m.timings.views
     );
+    // Solved well within the default budget (30 plain passes of work; the plain pass is 1).
+    assert!(work < 25.0, "{what}: {work} plain passes of work");
     assert!(
         off_err > 20.0,
         "{what}: the plain matcher solved it ({off_err} px)"
@@ -190,19 +194,9 @@ fn a_6x_zoom_of_image_b_off_centre_is_solved() {
     };
     let b_zoom = warp_image(&b, &zoom, 800, 640).unwrap();
     let gt = warp_matrix(&zoom) * h;
-    // No time budget: which views run does not depend on the machine's load.
-    common::init();
-    let p = Pipeline::builder()
-        .matcher(affcorr_pipeline::Matcher::XFeatLighterGlue)
-        .max_keypoints(1024)
-        .models_dir(common::models_dir())
-        .threads(2)
-        .views(ViewOptions {
-            relative_budget: None,
-            ..Default::default()
-        })
-        .build()
-        .unwrap();
+    // The default budget: counted in work, so which views run does not depend on the
+    // machine's load.
+    let p = pipeline(ViewMode::Auto);
     // B′'s pixels are a sixth of B's: 10 px in B′ is under 2 px in B.
     check_with(&p, &a, &b_zoom, &gt, "B zoomed 6x off-centre", 10.0);
 }
