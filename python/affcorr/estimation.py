@@ -56,7 +56,7 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
                                       it costs over 20% of the inliers or a points model
                                       explains 1.25x more: A too poor), else the lower weight
                                       that the noise of A measured on its inliers allows
-                                      (then run again with it; docs/estimation.md); 0
+                                      (its model polished at it; docs/estimation.md); 0
                                       otherwise. ``info.affine_weight`` is the weight used
   ``affine_refinement``  ``"final"``  where the affine terms of ACs enter the fits of H, F
                                       and the relative pose (``(N, 8)`` only): ``"off"``,

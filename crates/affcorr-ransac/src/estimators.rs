@@ -66,7 +66,7 @@ pub struct EstimatorOptions {
     /// (default), for the fundamental matrix and the relative pose when the data carry A:
     /// [`DEFAULT_AFFINE_WEIGHT`], falling back to 0 when that shows A too poor
     /// ([`DEFAULT_AFFINE_FALLBACK`]), else the lower weight that the data show A's noise to
-    /// allow (measured on the inliers of the first run, which is then run again with it); 0
+    /// allow (measured on the inliers of the first run, whose model is then polished at it); 0
     /// otherwise (H, points). The weight used is [`Estimate::affine_weight`]. See each
     /// problem's module for its units.
     pub affine_weight: Option<f64>,
