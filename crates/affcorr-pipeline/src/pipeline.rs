@@ -889,7 +889,7 @@ impl Pipeline {
                 verified,
                 screen: screen_score,
                 time: t.elapsed() + std::mem::take(&mut screen_time),
-                work: (store.meter.spent - reported) / store.meter.plain,
+                work: store.meter.in_passes(store.meter.spent - reported),
                 used: false,
             });
             reported = store.meter.spent;

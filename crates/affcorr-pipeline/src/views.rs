@@ -289,7 +289,12 @@ impl WorkMeter {
 
     /// The work so far in plain passes.
     pub(crate) fn passes(&self) -> f64 {
-        self.spent / self.plain.max(f64::MIN_POSITIVE)
+        self.in_passes(self.spent)
+    }
+
+    /// `work` (nominal units, as `spent`) in plain passes.
+    pub(crate) fn in_passes(&self, work: f64) -> f64 {
+        work / self.plain.max(f64::MIN_POSITIVE)
     }
 }
 
@@ -812,31 +817,10 @@ mod tests {
         assert!(labels.contains("B zoom 3 tile [0, 0.67; 0.33, 1]"));
     }
 
-    /// x2 = H x1 and A = ∂x2/∂x1 of a plane's homography `h` (row-major).
-    fn plane_ac(h: &[f64; 9], x: [f64; 2]) -> [f64; 8] {
-        let w = h[6] * x[0] + h[7] * x[1] + h[8];
-        let u = (h[0] * x[0] + h[1] * x[1] + h[2]) / w;
-        let v = (h[3] * x[0] + h[4] * x[1] + h[5]) / w;
-        let a = [
-            (h[0] - u * h[6]) / w,
-            (h[1] - u * h[7]) / w,
-            (h[3] - v * h[6]) / w,
-            (h[4] - v * h[7]) / w,
-        ];
-        [x[0], x[1], u, v, a[0], a[1], a[2], a[3]]
-    }
-
-    fn mul2(p: &[f64; 4], q: &[f64; 4]) -> [f64; 4] {
-        [
-            p[0] * q[0] + p[1] * q[2],
-            p[0] * q[1] + p[1] * q[3],
-            p[2] * q[0] + p[3] * q[2],
-            p[2] * q[1] + p[3] * q[3],
-        ]
-    }
-
     #[test]
     fn every_view_maps_plane_acs_back_exactly_and_magnified_tiles_show_their_window() {
+        use affcorr_geom::homography::ac_from_homography;
+        use affcorr_geom::{Mat2, Vec2};
         use affcorr_image::{GrayImage, ac_from_views, warp_image};
         let (w, h) = (640usize, 480usize);
         // A smooth texture (periods of 60-90 px), so that bilinear sampling is near exact.
@@ -846,7 +830,8 @@ mod tests {
             .collect();
         let img = GrayImage::new(w, h, data).unwrap();
         // A perspective plane between A and B (both w × h).
-        let plane = [0.9, 0.08, 25.0, -0.05, 1.1, 12.0, 1e-4, -6e-5, 1.0];
+        let plane = Mat3::new(0.9, 0.08, 25.0, -0.05, 1.1, 12.0, 1e-4, -6e-5, 1.0);
+        let linear = |w: &AffineWarp| Mat2::new(w.m[0], w.m[1], w.m[2], w.m[3]);
         let mut tiles = 0;
         for view in candidate_views() {
             let label = view.label();
@@ -857,13 +842,20 @@ mod tests {
             // x1' = Wa x1, x2' = Wb x2, A' = Wb A Wa⁻¹. Mapped back, it is the plane's.
             let ia = wa.inverse().unwrap();
             for (gx, gy) in [(40.0, 30.0), (320.0, 240.0), (600.0, 400.0), (150.0, 420.0)] {
-                let truth = plane_ac(&plane, [gx, gy]);
-                let (p, q) = (wa.apply([gx, gy]), wb.apply([truth[2], truth[3]]));
-                let a = mul2(
-                    &mul2(&wb.m, &[truth[4], truth[5], truth[6], truth[7]]),
-                    &ia.m,
-                );
-                let row = [p[0], p[1], q[0], q[1], a[0], a[1], a[2], a[3]];
+                let ac = ac_from_homography(&plane, &Vec2::new(gx, gy), 0).unwrap();
+                let truth = ac.to_row();
+                let (p, q) = (wa.apply([gx, gy]), wb.apply([ac.x2.x, ac.x2.y]));
+                let a = linear(&wb) * ac.a * linear(&ia);
+                let row = [
+                    p[0],
+                    p[1],
+                    q[0],
+                    q[1],
+                    a[(0, 0)],
+                    a[(0, 1)],
+                    a[(1, 0)],
+                    a[(1, 1)],
+                ];
                 let back = ac_from_views(&row, &wa, &wb).unwrap();
                 for (got, want) in back.iter().zip(&truth) {
                     assert!(

@@ -156,19 +156,15 @@ fn settle_default_weight<P: Problem>(
     let Some(w) = measured_affine_weight(data, f, &first.inliers, opts) else {
         return first;
     };
+    let (problem, start, threshold) = (at(w, kind), first.model.clone(), opts.ransac.threshold);
     let polished = match scoring_of(opts, ScoringKind::Msac) {
         ScoringKind::Magsac => polish(
-            &at(w, kind),
-            &MagsacPlusPlus::new(opts.ransac.threshold),
-            first.model.clone(),
+            &problem,
+            &MagsacPlusPlus::new(threshold),
+            start,
             &opts.ransac,
         ),
-        _ => polish(
-            &at(w, kind),
-            &Msac::new(opts.ransac.threshold),
-            first.model.clone(),
-            &opts.ransac,
-        ),
+        _ => polish(&problem, &Msac::new(threshold), start, &opts.ransac),
     };
     match polished {
         Ok(mut e) => {
