@@ -84,6 +84,47 @@ impl Loss {
             _ => (self.cost(s), self.weight(s)),
         }
     }
+
+    /// Σₖ ρ(sₖ), the cost of one datum's N residuals (the four of an AC's A). The Cauchy loss
+    /// takes one logarithm instead of N: Σₖ log(1 + xₖ) = log Π(1 + xₖ) = log1p(q), with
+    /// q = Π(1 + xₖ) − 1 built as q ← q + x + q·x. Every term is ≥ 0, so nothing cancels and
+    /// small xₖ keep their precision; a product that overflows falls back to the N logarithms.
+    #[inline(always)]
+    pub fn total_cost<const N: usize>(&self, s: &[f64; N]) -> f64 {
+        match *self {
+            Loss::Cauchy { scale_sq } => {
+                let mut q = 0.0;
+                for &sk in s {
+                    let x = sk / scale_sq;
+                    q += x + q * x;
+                }
+                if q.is_finite() {
+                    scale_sq * q.ln_1p()
+                } else {
+                    s.iter().map(|&sk| self.cost(sk)).sum()
+                }
+            }
+            _ => s.iter().map(|&sk| self.cost(sk)).sum(),
+        }
+    }
+
+    /// (Σₖ ρ(sₖ), ρ′(sₖ) for each k): [`Loss::cost_and_weight`] of one datum's N residuals,
+    /// with the Cauchy cost of [`Loss::total_cost`].
+    #[inline(always)]
+    pub fn total_cost_and_weights<const N: usize>(&self, s: &[f64; N]) -> (f64, [f64; N]) {
+        match *self {
+            Loss::Cauchy { .. } => (self.total_cost(s), s.map(|sk| self.weight(sk))),
+            _ => {
+                let mut cost = 0.0;
+                let w = s.map(|sk| {
+                    let (rho, w) = self.cost_and_weight(sk);
+                    cost += rho;
+                    w
+                });
+                (cost, w)
+            }
+        }
+    }
 }
 
 /// Intervals of the MAGSAC++ tables over u = r²/τ² ∈ [0, 1].
@@ -256,6 +297,37 @@ mod tests {
         // ρ′ is the derivative of ρ.
         let h = 1e-6;
         assert!(((c.cost(1.0 + h) - c.cost(1.0 - h)) / (2.0 * h) - c.weight(1.0)).abs() < 1e-8);
+    }
+
+    #[test]
+    fn a_datums_total_cost_is_the_sum_of_its_residuals_costs() {
+        let losses = [
+            Loss::Squared,
+            Loss::Truncated { threshold_sq: 4.0 },
+            Loss::Cauchy { scale_sq: 2.0 },
+            Loss::Cauchy { scale_sq: 1e-9 },
+            Loss::Magsac { threshold_sq: 4.0 },
+        ];
+        // Tiny, ordinary and huge residuals, one that overflows the Cauchy product and a zero.
+        let cases = [
+            [1e-20, 3e-18, 0.0, 1e-16],
+            [0.3, 1.7, 2.9, 12.0],
+            [1e150, 2.0, 1e160, 0.5],
+            [1e300, 1e300, 1e-3, 0.0],
+        ];
+        for loss in losses {
+            for s in cases {
+                let sum: f64 = s.iter().map(|&sk| loss.cost(sk)).sum();
+                let total = loss.total_cost(&s);
+                assert!(
+                    (total - sum).abs() <= 1e-14 * sum.abs() || total == sum,
+                    "{loss:?} {s:?}: {total} vs {sum}"
+                );
+                let (cost, w) = loss.total_cost_and_weights(&s);
+                assert_eq!(cost, total);
+                assert_eq!(w, s.map(|sk| loss.weight(sk)));
+            }
+        }
     }
 
     #[test]

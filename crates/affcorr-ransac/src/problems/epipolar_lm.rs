@@ -152,8 +152,8 @@ pub(crate) fn affine_cost(
         if c <= 0.0 {
             continue;
         }
-        let [a0, a1] = sampson_affine(f, &data.ac(i));
-        cost += c * (terms.loss.cost(terms.lambda * a0) + terms.loss.cost(terms.lambda * a1));
+        let a = sampson_affine(f, &data.ac(i));
+        cost += c * terms.loss.total_cost(&a.map(|a| terms.lambda * a));
     }
     cost
 }
@@ -176,10 +176,13 @@ pub(crate) fn affine_normal_equations(
         if c <= 0.0 {
             continue;
         }
-        for (s, g) in sampson_affine_signed_grad_f(f, &data.ac(i)) {
-            let (rho, w) = terms.loss.cost_and_weight(terms.lambda * s * s);
-            cost += c * rho;
-            sums.add(&g, c * w * terms.lambda, s);
+        let terms_of_ac = sampson_affine_signed_grad_f(f, &data.ac(i));
+        let (rho, w) = terms
+            .loss
+            .total_cost_and_weights(&terms_of_ac.each_ref().map(|(s, _)| terms.lambda * s * s));
+        cost += c * rho;
+        for ((s, g), w) in terms_of_ac.iter().zip(w) {
+            sums.add(g, c * w * terms.lambda, *s);
         }
     }
     sums.project(&flat(basis)[..basis.len()], jtj, jtr);

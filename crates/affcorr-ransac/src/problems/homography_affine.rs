@@ -100,7 +100,7 @@ impl AffineSums {
         h: &Mat3,
         data: &Correspondences,
         indices: &[usize],
-        mut weight: impl FnMut(usize, f64) -> (f64, f64),
+        mut weight: impl FnMut(usize, [f64; 4]) -> (f64, [f64; 4]),
     ) -> f64 {
         let mut cost = 0.0;
         let (mut x, mut y) = ([0.0; BLOCK], [0.0; BLOCK]);
@@ -151,10 +151,10 @@ impl AffineSums {
                 }
             }
             for (j, &i) in chunk.iter().enumerate() {
-                for e in 0..4 {
-                    let rho;
-                    (rho, omega[e][j]) = weight(i, d[e][j]);
-                    cost += rho;
+                let (rho, w) = weight(i, [d[0][j], d[1][j], d[2][j], d[3][j]]);
+                cost += rho;
+                for (om, w) in omega.iter_mut().zip(w) {
+                    om[j] = w;
                 }
             }
             for om in &mut omega {
@@ -312,9 +312,11 @@ impl LeastSquares for HomographyAffineFit<'_, '_> {
             if c <= 0.0 {
                 continue;
             }
-            for d in affine_residuals(h, &self.data.x1[i], &self.data.a[i]) {
-                cost += c * self.terms.loss.cost(self.terms.lambda * d * d);
-            }
+            let d = affine_residuals(h, &self.data.x1[i], &self.data.a[i]);
+            cost += c * self
+                .terms
+                .loss
+                .total_cost(&d.map(|d| self.terms.lambda * d * d));
         }
         cost
     }
@@ -336,15 +338,21 @@ impl LeastSquares for HomographyAffineFit<'_, '_> {
         cost += dispatch(
             #[inline(always)]
             || {
-                sums.add_acs(h, self.data, indices, |i, d| {
-                    let (c, s) = (self.confidence(i), lambda * d * d);
-                    if COST {
-                        let (rho, w) = affine_loss.cost_and_weight(s);
-                        (c * rho, c * w * lambda)
-                    } else {
-                        (0.0, c * affine_loss.weight(s) * lambda)
-                    }
-                })
+                sums.add_acs(
+                    h,
+                    self.data,
+                    indices,
+                    #[inline(always)]
+                    |i, d| {
+                        let (c, s) = (self.confidence(i), d.map(|d| lambda * d * d));
+                        if COST {
+                            let (rho, w) = affine_loss.total_cost_and_weights(&s);
+                            (c * rho, w.map(|w| c * w * lambda))
+                        } else {
+                            (0.0, s.map(|s| c * affine_loss.weight(s) * lambda))
+                        }
+                    },
+                )
             },
         );
         sums.entry_sums()
@@ -483,7 +491,15 @@ mod tests {
         let indices: Vec<usize> = (1..acs.len()).rev().collect();
         let weight = |i: usize, d: f64| (0.3 * d * d, 0.7 + d.abs() + 0.01 * i as f64);
         let (mut structured, mut dense) = (AffineSums::default(), EntrySums::new());
-        let cost_s = structured.add_acs(&h, &data, &indices, weight);
+        let cost_s = structured.add_acs(&h, &data, &indices, |i, d| {
+            let mut cost = 0.0;
+            let w = d.map(|d| {
+                let (rho, w) = weight(i, d);
+                cost += rho;
+                w
+            });
+            (cost, w)
+        });
         let mut cost_d = 0.0;
         for &i in &indices {
             for (d, grad) in affine_residuals_and_gradients(&h, &data.x1[i], &data.a[i]) {
