@@ -92,3 +92,11 @@ def test_a_selection_of_families_gets_the_scenes_of_the_full_run():
         np.testing.assert_array_equal(a["scene"]["corrs"], b["scene"]["corrs"])
     other = [j for j in full if j["family"] == "A 3%"][0]
     assert not np.array_equal(some[0]["scene"]["corrs"], other["scene"]["corrs"])
+
+
+@pytest.mark.parametrize("flag", ["--repeat", "--timing-rounds"])
+def test_a_count_below_one_is_named(flag, capsys):
+    with pytest.raises(SystemExit) as e:
+        sf.main([flag, "0"])
+    assert e.value.code == 2
+    assert f"{flag} must be at least 1, got 0" in capsys.readouterr().err
