@@ -125,25 +125,32 @@ def test_a_pair_no_view_solves_runs_the_same_views_however_long_they_take():
     assert not any(v["verified"] for v in runs[0].views)
 
 
-def test_a_steep_tilt_of_a_rotated_pair_is_solved_through_a_screened_tilt_view():
+def _rot(deg: float) -> np.ndarray:
+    c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
+    return np.array([[c, -s], [s, c]])
+
+
+def _tilted_b(t: float, direction_deg: float, turn_deg: float = 0.0):
+    """Graffiti's A and B' = W B with W = R(turn) T(t, direction): B compressed t times along
+    (sin direction, cos direction) after ASIFT's anti-aliasing blur, then turned; and the
+    homography A -> B'."""
     import cv2
 
     a = affcorr.read_gray_image(GRAF / "graf1.png")
     b = affcorr.read_gray_image(GRAF / "graf3.png")
-
-    # B' = W B with W = R(200°) T(4, 20°): compressed 4x along (sin 20°, cos 20°), then turned.
-    def rot(deg):
-        c, s = np.cos(np.radians(deg)), np.sin(np.radians(deg))
-        return np.array([[c, -s], [s, c]])
-
-    M = rot(200) @ rot(20).T @ np.diag([1.0, 0.25]) @ rot(20)  # noqa: N806
+    M = _rot(turn_deg) @ _rot(direction_deg).T @ np.diag([1.0, 1.0 / t]) @ _rot(direction_deg)  # noqa: N806
     h, w = b.shape
     corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], float) @ M.T
     W = np.c_[M, -corners.min(0)]  # noqa: N806
     size = tuple(int(v) for v in np.ceil(np.ptp(corners, axis=0)) + 1)
-    blurred = cv2.GaussianBlur(b.astype(np.float32), (0, 0), 0.8 * np.sqrt(15.0))
+    blurred = cv2.GaussianBlur(b.astype(np.float32), (0, 0), 0.8 * np.sqrt(t * t - 1))
     tilted = cv2.warpAffine(blurred, W, size, flags=cv2.INTER_LINEAR)
-    gt = np.vstack([W, [0, 0, 1]]) @ graffiti()[2]
+    return a, tilted, np.vstack([W, [0, 0, 1]]) @ graffiti()[2]
+
+
+def test_a_steep_tilt_of_a_rotated_pair_is_solved_through_a_screened_tilt_view():
+    # B turned by 200° and foreshortened 4x along 20°.
+    a, tilted, gt = _tilted_b(4.0, 20.0, 200.0)
 
     H_off, _ = _pipe("off").homography(a, tilted)
     assert not np.isfinite(H_off).all() or corner_error(H_off, gt, *a.shape[::-1]) > 20
@@ -156,3 +163,17 @@ def test_a_steep_tilt_of_a_rotated_pair_is_solved_through_a_screened_tilt_view()
     c = res.corrs[info.inliers]
     A_gt = affcorr.correspondences_from_homography(gt, c[:, :2])[:, 4:]  # noqa: N806
     assert len(c) > 100 and np.median(np.linalg.norm(c[:, 4:] - A_gt, axis=1)) < 0.1
+
+
+def test_a_plain_pass_verified_by_too_few_inliers_is_rivalled_by_the_view_they_guide():
+    # A tilt of 3.5 verifies the plain pair with a score of its matches, too few to end the
+    # cascade on; after the rotations (its first rivals) the view that undoes their dominant
+    # map finds hundreds.
+    a, tilted, gt = _tilted_b(3.5, 0.0)
+    H, info, res = _pipe("auto").homography(a, tilted, return_matches=True)
+    plain, *rivals, guided = res.views
+    assert plain["verified"] and plain["inliers"] < 2 * 12, res.views
+    assert rivals and all(v["label"].startswith("B rot") for v in rivals), res.views
+    assert guided["label"].endswith("guided") and guided["used"], res.views
+    assert guided["inliers"] > 5 * plain["inliers"]
+    assert corner_error(H, gt, a.shape[1], a.shape[0]) < 2.0

@@ -133,7 +133,9 @@ class MatchResult:
             ``matches``, ``inliers``, ``verified``, ``screen`` (the view's rank score in a
             screened group of tilts or tiles, else None),
             ``seconds``, ``work`` (what it took from ``view_relative_budget``, in plain
-            passes: counted, not timed, so the same pair runs the same views on any machine),
+            passes: counted, not timed, so the same pair runs the same views on any machine;
+            the views' work sums to the cascade's, the last view's including any screening
+            after it that the budget cut short),
             ``used``: whether its ACs are the result's); empty when the cascade did not run
             (``views="off"``, dense matchers).
     """

@@ -132,15 +132,22 @@ def hpatches_pairs(max_side: int = 512, seed: int = 0, images: int | None = None
 
 
 def extreme_pairs(
-    tilts=(50, 60, 70, 80), seed: int = 0, images: int | None = None, size=(640, 480)
+    tilts=(50, 60, 70, 80),
+    seed: int = 0,
+    images: int | None = None,
+    size=(640, 480),
+    every_held_out: bool = False,
 ) -> list[Pair]:
     """One pair per held-out image and tilt of camera 2 (camera 1: tilt 0-10 deg; the same
-    distance to the plane, so only the viewpoint changes the scale)."""
+    distance to the plane, so only the viewpoint changes the scale). The images are
+    EXTREME_IMAGES, or with ``every_held_out`` every held-out texture; a seed other than 0
+    draws other cameras (and names the pairs ``...-s<seed>``)."""
     from affcorr.train.views import render_plane_views
 
     tex = _held_out()
+    names = sorted(tex) if every_held_out else EXTREME_IMAGES
     pairs = []
-    for name in EXTREME_IMAGES[:images]:
+    for name in names[:images]:
         if name not in tex:
             continue
         for t in tilts:
@@ -150,7 +157,6 @@ def extreme_pairs(
                 rng, tex[name], size=size, max_scale_ratio=1.0, tilts_deg=(t1, float(t))
             )
             stem = name.rsplit(".", 1)[0]
-            pairs.append(
-                Pair(f"x-{stem}-{t}", "extreme", _u8(i1), _u8(i2), H, {"tilt": t, "tilt1": t1})
-            )
+            pid = f"x-{stem}-{t}" + (f"-s{seed}" if seed else "")
+            pairs.append(Pair(pid, "extreme", _u8(i1), _u8(i2), H, {"tilt": t, "tilt1": t1}))
     return pairs

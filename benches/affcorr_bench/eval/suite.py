@@ -24,8 +24,10 @@ MATCHES_VERSION = 1
 #: Counts changes of affcorr's pipeline that alter its matches (the view cascade's steps, the
 #: refinement): affcorr's cached matches carry it, so bumping it re-runs affcorr's rows and
 #: keeps the peers'. 2: third-size tiles magnified by 3 in the cascade. 3: the cascade's
-#: budget counts work, not time (default 30 plain passes of work).
-AFFCORR_PIPELINE_REVISION = 3
+#: budget counts work, not time (default 30 plain passes of work). 4: a plain pass verified by fewer
+#: than CONFIDENT_VIEW x min_inliers is rivalled by every view (its AC-guided one after the
+#: rotations); tilts of 4 before the tiles.
+AFFCORR_PIPELINE_REVISION = 4
 #: Debian's OpenBLAS, unpacked by setup.sh (not installed: the machine's libblas stays as is).
 OPENBLAS = CACHE / "openblas" / "usr/lib/x86_64-linux-gnu/openblas-pthread"
 

@@ -736,17 +736,22 @@ impl Pipeline {
             .map(|(r, _)| *r)
             .collect();
         let mut queue: VecDeque<(ViewSpec, Option<usize>)> = VecDeque::new();
-        let rivals_only = rival_floor > 0;
+        // A weak plain pass verified by so few inliers that a synthetic view would not end the
+        // cascade on them (`views::CONFIDENT_VIEW`) is judged as such a view: kept, and every
+        // view rivals it (the AC-guided one first), not only the rotations. A steep tilt
+        // verifies like this, with a dozen or two matches in a corner of the overlap.
+        // Its AC-guided view follows the rotations, which rival it first: a repetitive
+        // pattern matched at the wrong rotation guides to a wrong view that verifies too (a
+        // failed plain pass's guide comes first).
+        let rivals_only = rival_floor > 0 && inliers >= CONFIDENT_VIEW * o.min_inliers;
         let mut steps: VecDeque<Step> = if rivals_only {
             VecDeque::from([Step::Screened(rival_views())])
         } else {
-            let mut q: VecDeque<Step> = guided_view(&inlier_acs)
-                .map(Step::View)
-                .into_iter()
-                .collect();
-            q.extend(cascade_steps());
-            q
+            cascade_steps().into()
         };
+        if let Some(g) = guided_view(&inlier_acs).filter(|_| !rivals_only) {
+            steps.insert(usize::from(weak), Step::View(g));
+        }
         // The views of screened groups past their best: tried once every step has run.
         let mut deferred: Vec<(f64, ViewSpec, Option<usize>)> = Vec::new();
         let (mut best, mut best_inliers) = (plain, if verified { inliers } else { 0 });
@@ -921,6 +926,13 @@ impl Pipeline {
                 // A weak proof (`views::CONFIDENT_VIEW`): kept, and rivalled by the views left.
                 rival_floor = rival_floor.max((RIVAL_MARGIN * best_inliers as f64).ceil() as usize);
             }
+        }
+        // Work spent after the last view (a group's extractions and screens when the budget
+        // stopped the cascade before any of its views ran) is the last view's: the views'
+        // work sums to the cascade's (the plain pass's stays 1).
+        let reports_len = reports.len();
+        if let Some(last) = reports.last_mut().filter(|_| reports_len > 1) {
+            last.work += store.meter.in_passes(store.meter.spent - reported);
         }
         reports[best_index].used = true;
         tracing::debug!(

@@ -13,7 +13,10 @@
 //!    inliers than [`WEAK_YIELD`] of the keypoint budget: a repetitive pattern matched at
 //!    the wrong rotation looks like this) is rivalled by B rotated in 45° steps
 //!    ([`rival_views`], screened; those that do not stand out are not matched); a rival with
-//!    [`RIVAL_MARGIN`] times its inliers replaces it.
+//!    [`RIVAL_MARGIN`] times its inliers replaces it. Verified by fewer than
+//!    [`CONFIDENT_VIEW`] × min_inliers (too few to end the cascade on a synthetic view), it is
+//!    rivalled by every view of step 2, the one its inliers guide right after the rotations
+//!    (a steep tilt verifies with a dozen or two matches).
 //! 2. If it fails (and [`ViewMode::Auto`]), synthetic views of one image are matched against
 //!    the other, in order, until one verifies ([`ViewMode::Full`] tries them all and keeps
 //!    the best), within [`ViewOptions::relative_budget`]:
@@ -29,11 +32,11 @@
 //!      keypoint budget lands on the overlap);
 //!    - then **screened groups** ([`Step::Screened`], [`screen`]): tilts t = 2 (4 directions)
 //!      of A and of B, each against the other image as it is and rotated by 270°, 90° and
-//!      180° (a steep tilt of a rotated pair needs both undone); **tiles** of B and of A:
-//!      half-size tiles magnified by 2 against the other image shrunk by ½ (3–6× zooms), one
-//!      group ranked by the screen but matched whole ([`Step::Ranked`]), then third-size
-//!      tiles magnified by 3 against the other image as it is (6×), ranked the same; tilts
-//!      t = 4 (8 directions) of A and of B against the rotations. A group extracts each of
+//!      180° (a steep tilt of a rotated pair needs both undone); tilts t = 4 (8 directions)
+//!      of A and of B against the rotations; **tiles** of B and of A: half-size tiles
+//!      magnified by 2 against the other image shrunk by ½ (3–6× zooms), one group ranked by
+//!      the screen but matched whole ([`Step::Ranked`]), then third-size tiles magnified by 3
+//!      against the other image as it is (6×), ranked the same. A group extracts each of
 //!      its warped images once, ranks its views by XFeat's mutual nearest neighbours and a
 //!      homography's inliers (milliseconds, where LighterGlue and the ACs take hundreds),
 //!      matches those clearly above the group's noise ([`screen_run`]) and defers the rest
@@ -484,7 +487,9 @@ pub struct ViewReport {
     pub time: Duration,
     /// The work it took from [`ViewOptions::relative_budget`], in plain passes (the plain
     /// pass: 1): its extractions, its group's screen when it is the first of the group to run,
-    /// its matching and its ACs; counted, not timed.
+    /// its matching and its ACs; counted, not timed. The last view also carries what was
+    /// spent after it (a group's extractions and screens when the budget stopped the cascade
+    /// before any of its views ran), so that the views' work sums to the cascade's.
     pub work: f64,
     /// Whether its ACs are the result's (one view of a cascade; a verified view with the most
     /// inliers is not used when it fell short of a rival's margin, [`RIVAL_MARGIN`]).
@@ -561,9 +566,12 @@ pub fn cascade_steps() -> Vec<Step> {
     // inside one), meet the zoomed image shrunk by ½.
     let tiles = |image| tile_grid(image, 2.0, [0.25, 0.0, 0.5], 0.5);
     // Tilt 2 first (with the other image rotated it solved every 80° tilt of experiment 4
-    // outright or through its refinement), then the tiles, then tilt 4: each screened group
-    // costs its extractions, and a zoom pair's cheap plain pass leaves the tiles a small
-    // budget.
+    // outright or through its refinement), then tilt 4, then the tiles. A tilt group's warped
+    // images are foreshortened (a quarter of the pixels at tilt 4) and its screen tells the
+    // right view, where the tiles are full-size images run whole: with the tiles first, the
+    // tiles took 20 of the 30 plain passes of budget, and 80° tilts of other textures and
+    // cameras (benches/results/eval/extreme_varied.md) never reached tilt 4. Tilt 4 first
+    // costs a 4–6× zoom pair about 4 more plain passes of work (views.md).
     steps.push(Step::Screened(
         rotated_tilts(A, 2.0, 4)
             .chain(rotated_tilts(B, 2.0, 4))
@@ -580,10 +588,10 @@ pub fn cascade_steps() -> Vec<Step> {
     // image runs before the other image's tiles are reached. The half-size tiles first: with
     // the third-size tiles first, a 6× zoom that only a half-size tile solves
     // (tests/views.rs) reached it near the budget, and failed on a loaded machine.
-    steps.push(Step::Ranked(tiles(B).chain(tiles(A)).collect()));
-    steps.push(Step::Ranked(third_tiles(B).chain(third_tiles(A)).collect()));
     steps.push(Step::Screened(rotated_tilts(A, 4.0, 8).collect()));
     steps.push(Step::Screened(rotated_tilts(B, 4.0, 8).collect()));
+    steps.push(Step::Ranked(tiles(B).chain(tiles(A)).collect()));
+    steps.push(Step::Ranked(third_tiles(B).chain(third_tiles(A)).collect()));
     steps
 }
 
