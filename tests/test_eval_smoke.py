@@ -96,3 +96,11 @@ def test_extreme_core(name, pair):
     if name == "affcorr":
         r = extreme.score_pair(pair, name, m, extreme.affcorr_homography)
         assert r["matched"], r
+
+
+@pytest.mark.parametrize("seed", ["x", ",", "1,b"])
+def test_extreme_names_a_bad_seed_list(seed, capsys):
+    with pytest.raises(SystemExit) as e:
+        extreme.main(["--seed", seed])
+    assert e.value.code == 2
+    assert f"--seed takes comma-separated integers, got {seed!r}" in capsys.readouterr().err

@@ -14,12 +14,13 @@ within 10 px of the ground truth (mean over a grid of such points; image 1's cor
 HPatches measure, can lie near view 2's vanishing line, where even a good H is far off).
 Correct inliers: inliers of the estimated H within 3 px of the ground truth.
 
-The varied set (``--every-held-out --seed 1,2``): every held-out texture (six, two of them not
-in the experiment's four), each tilt, cameras and rolls drawn by other seeds: a check that what
-the cascade solves is not the four images' (benches/results/eval/extreme_varied.md).
 Reported per method: matched pairs N (and per tilt), mean correct inliers per matched pair
 (the paper's "inl."), and mean correct matches per pair before RANSAC. affcorr additionally
 with its own 2-AC homography RANSAC on its ACs (affcorr.estimate_homography, 3 px).
+
+The varied set (``--every-held-out --seed 1,2``): every held-out texture (six, two of them not
+in the experiment's four), each tilt, cameras and rolls drawn by other seeds: a check that what
+the cascade solves is not the four images' (benches/results/eval/extreme_varied.md).
 
 Writes benches/results/eval/extreme.{md,csv,png}.
 """
@@ -169,13 +170,18 @@ def main(argv=None) -> None:
     p.add_argument("--methods", default=",".join(matchers.NAMES))
     p.add_argument("--out", default=str(suite.RESULTS / "extreme"))
     args = p.parse_args(argv)
+    try:
+        seeds = [int(x) for x in args.seed.split(",") if x.strip()]
+    except ValueError:
+        seeds = []
+    if not seeds:
+        p.error(f"--seed takes comma-separated integers, got {args.seed!r}")
     suite.use_openblas()
     t0 = time.time()
     tilts = [int(t) for t in args.tilts.split(",")]
     wanted = args.methods.split(",")
     av = matchers.available()
     names = [n for n in wanted if not av.get(n, "unknown method")]
-    seeds = [int(x) for x in args.seed.split(",") if x.strip()]
     pairs = [
         q
         for seed in seeds

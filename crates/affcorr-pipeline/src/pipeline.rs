@@ -738,11 +738,12 @@ impl Pipeline {
         let mut queue: VecDeque<(ViewSpec, Option<usize>)> = VecDeque::new();
         // A weak plain pass verified by so few inliers that a synthetic view would not end the
         // cascade on them (`views::CONFIDENT_VIEW`) is judged as such a view: kept, and every
-        // view rivals it (the AC-guided one first), not only the rotations. A steep tilt
-        // verifies like this, with a dozen or two matches in a corner of the overlap.
-        // Its AC-guided view follows the rotations, which rival it first: a repetitive
-        // pattern matched at the wrong rotation guides to a wrong view that verifies too (a
-        // failed plain pass's guide comes first).
+        // view rivals it, not only the rotations. A steep tilt verifies like this, with a
+        // dozen or two matches in a corner of the overlap. Its AC-guided view comes right
+        // after the rotations, which rival it first: a repetitive pattern matched at the
+        // wrong rotation guides to a wrong view that verifies too (views_pose lost chessboard
+        // and stereo pairs at 90–180° with the guide first). A failed plain pass's guide
+        // comes first.
         let rivals_only = rival_floor > 0 && inliers >= CONFIDENT_VIEW * o.min_inliers;
         let mut steps: VecDeque<Step> = if rivals_only {
             VecDeque::from([Step::Screened(rival_views())])
