@@ -1,12 +1,15 @@
 """Scene families: every estimator candidate on the same synthetic two-view scenes, family by
 family, to choose the defaults per problem (issue 22).
 
-    .venv/bin/python -m affcorr_bench.scene_families [--seeds 10] [--n 800] [--quick]
+    .venv/bin/python -m affcorr_bench.scene_families [--seeds 10] [--n 800] [--families NAME ...]
+        [--repeat 3] [--timing-rounds 2]
 
 writes benches/results/scene_families.md and .csv. PoseLib and OpenCV run in
 benches/peers/.venv-peers (benches/peers/setup.sh) as a child process on the same scenes (saved
 to an .npz); affcorr runs here. Everything single-threaded (RAYON_NUM_THREADS=1,
-cv2.setNumThreads(1)).
+cv2.setNumThreads(1)). Times: the fastest of ``--repeat`` calls back to back, and for the
+defaults and the peers the fastest of ``--timing-rounds`` rounds run alternately (affcorr,
+peers, affcorr, ...), since the machine's speed drifts between the two sides' runs.
 
 The generator is this module's own (``make_scene``), not the peer harness's or the Rust crate's:
 
