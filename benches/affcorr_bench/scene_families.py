@@ -448,6 +448,20 @@ def make_jobs(problems, fams, seeds: int, n: int) -> list[dict]:
     return jobs
 
 
+def _row(job: dict, method: str, err1: float, err2: float, seconds: float, failed: bool) -> dict:
+    """One method's result on one scene of the run, as the CSV and the report take it."""
+    return dict(
+        problem=job["problem"],
+        family=job["family"],
+        seed=job["seed"],
+        method=method,
+        err1=err1,
+        err2=err2,
+        ms=seconds * 1e3,
+        failed=failed,
+    )
+
+
 def run_peers(jobs: list[dict], repeat: int) -> tuple[dict, str]:
     """Every peer on every scene of ``jobs``, in the peers' venv (``worker``): its results by
     key ``"{peer}/{scene index}/err"`` (errors, time in s, failed) and the peers' versions."""
@@ -552,18 +566,7 @@ def main(argv: list[str] | None = None) -> int:
                 args.repeat, run_affcorr, j["problem"], j["scene"], j["thr"], data, opts
             )
             e = errors(j["problem"], out, j["scene"])
-            rows.append(
-                dict(
-                    problem=j["problem"],
-                    family=j["family"],
-                    seed=j["seed"],
-                    method=name,
-                    err1=e[0],
-                    err2=e[1],
-                    ms=dt * 1e3,
-                    failed=out is None,
-                )
-            )
+            rows.append(_row(j, name, e[0], e[1], dt, out is None))
     load_mid = common.load_average()
     # the peers, in their venv, on the same scenes
     versions = "peers not run"
@@ -572,18 +575,7 @@ def main(argv: list[str] | None = None) -> int:
         for i, j in enumerate(jobs):
             for name in PEERS:
                 e1, e2, dt, failed = z[f"{name}/{i}/err"]
-                rows.append(
-                    dict(
-                        problem=j["problem"],
-                        family=j["family"],
-                        seed=j["seed"],
-                        method=name,
-                        err1=e1,
-                        err2=e2,
-                        ms=dt * 1e3,
-                        failed=bool(failed),
-                    )
-                )
+                rows.append(_row(j, name, e1, e2, dt, bool(failed)))
         # Further rounds time the defaults and the peers again, alternately, and keep each
         # scene's fastest: the load of a shared machine drifts over minutes, and one round
         # of each side put the speed-up of identical code 30-40% apart in two runs.

@@ -931,8 +931,7 @@ impl Pipeline {
         // Work spent after the last view (a group's extractions and screens when the budget
         // stopped the cascade before any of its views ran) is the last view's: the views'
         // work sums to the cascade's (the plain pass's stays 1).
-        let reports_len = reports.len();
-        if let Some(last) = reports.last_mut().filter(|_| reports_len > 1) {
+        if let [_, .., last] = reports.as_mut_slice() {
             last.work += store.meter.in_passes(store.meter.spent - reported);
         }
         reports[best_index].used = true;

@@ -828,7 +828,7 @@ mod tests {
     #[test]
     fn every_view_maps_plane_acs_back_exactly_and_magnified_tiles_show_their_window() {
         use affcorr_geom::homography::ac_from_homography;
-        use affcorr_geom::{Mat2, Vec2};
+        use affcorr_geom::{AffineCorrespondence, Mat2, Vec2};
         use affcorr_image::{GrayImage, ac_from_views, warp_image};
         let (w, h) = (640usize, 480usize);
         // A smooth texture (periods of 60-90 px), so that bilinear sampling is near exact.
@@ -853,18 +853,12 @@ mod tests {
                 let ac = ac_from_homography(&plane, &Vec2::new(gx, gy), 0).unwrap();
                 let truth = ac.to_row();
                 let (p, q) = (wa.apply([gx, gy]), wb.apply([ac.x2.x, ac.x2.y]));
-                let a = linear(&wb) * ac.a * linear(&ia);
-                let row = [
-                    p[0],
-                    p[1],
-                    q[0],
-                    q[1],
-                    a[(0, 0)],
-                    a[(0, 1)],
-                    a[(1, 0)],
-                    a[(1, 1)],
-                ];
-                let back = ac_from_views(&row, &wa, &wb).unwrap();
+                let seen = AffineCorrespondence {
+                    x1: Vec2::new(p[0], p[1]),
+                    x2: Vec2::new(q[0], q[1]),
+                    a: linear(&wb) * ac.a * linear(&ia),
+                };
+                let back = ac_from_views(&seen.to_row(), &wa, &wb).unwrap();
                 for (got, want) in back.iter().zip(&truth) {
                     assert!(
                         (got - want).abs() < 1e-9,
