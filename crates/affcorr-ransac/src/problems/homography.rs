@@ -532,4 +532,46 @@ mod tests {
         );
         assert!((refined.norm() - 1.0).abs() < 1e-12);
     }
+
+    #[test]
+    fn a_start_near_the_optimum_takes_the_gauss_newton_step_with_little_damping() {
+        // The final refinement's case: the linear fit on every inlier, a small step from the
+        // geometric optimum, in pixel coordinates (a badly conditioned JᵀJ).
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(8);
+        let scene = PlaneScene::random(&mut rng);
+        let noise = NoiseModel {
+            planes: 1,
+            outlier_ratio: 0.0,
+            pixel_noise: 1.0,
+            affine_noise: 0.0,
+        };
+        let (acs, _) = noisy_correspondences(&mut rng, &scene, 500, &noise);
+        let data = Correspondences::from_acs(&acs).unwrap();
+        let problem = HomographyProblem::new(&data, SampleKind::Points, 0.0);
+        let all: Vec<usize> = (0..500).collect();
+        let linear = problem.fit_nonminimal(&all, None).unwrap();
+        let cost_after = |max_iterations: usize, initial_damping: f64| {
+            let options = LmOptions {
+                max_iterations,
+                initial_damping,
+                noise_fraction: 0.0,
+                cost_tolerance: 0.0,
+                ..Default::default()
+            };
+            let h = problem
+                .refine(&linear, &all, &Loss::Squared, &options)
+                .unwrap();
+            problem.cost(&h, &all, &Loss::Squared)
+        };
+        let optimum = cost_after(100, 1e-3);
+        let excess = |cost: f64| (cost - optimum) / optimum;
+        // One step with λ = 1e-9 (Gauss–Newton) lands on the optimum, to 1e-9 of its cost ...
+        let gauss_newton = excess(cost_after(1, 1e-9));
+        assert!(gauss_newton < 1e-9, "{gauss_newton}");
+        // ... while the default damping shortens the steps in the flat directions: three
+        // steps still leave more than the final refinement's stopping rule allows (0.001 of
+        // the cost per datum, 2e-6 of the cost here).
+        let damped = excess(cost_after(3, 1e-3));
+        assert!(damped > 2e-6, "{damped}");
+    }
 }
