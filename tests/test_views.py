@@ -3,7 +3,8 @@ image B turned upside down, exactly, by numpy) is solved through a synthetic vie
 in the original pixels with A composed with the view's warp, and the report says which view.
 The Rust tests (crates/affcorr-pipeline/tests/views.rs) cover 135° and a 4x zoom; here also a
 steep tilt of a rotated pair (B turned by 200° and foreshortened 4x), which only a tilt view
-against a rotated view of B solves."""
+against a rotated view of B solves, and a 4x zoom whose kept view, verified with few inliers, is
+grown by guided re-matching."""
 
 from __future__ import annotations
 
@@ -177,3 +178,27 @@ def test_a_plain_pass_verified_by_too_few_inliers_is_rivalled_by_the_view_they_g
     assert guided["label"].endswith("guided") and guided["used"], res.views
     assert guided["inliers"] > 5 * plain["inliers"]
     assert corner_error(H, gt, a.shape[1], a.shape[0]) < 2.0
+
+
+def test_a_view_kept_with_a_weak_yield_is_grown_from_its_inliers():
+    # A zoomed 4x into its centre: the zoom view that solves it verifies with a few dozen
+    # inliers (a weak yield for 1024 keypoints), which guided re-matching grows, unasked.
+    import cv2
+
+    a = affcorr.read_gray_image(GRAF / "graf1.png")
+    b = affcorr.read_gray_image(GRAF / "graf3.png")
+    h, w = a.shape
+    Z = np.array([[4.0, 0, -1.5 * (w - 1)], [0, 4.0, -1.5 * (h - 1)], [0, 0, 1]])  # noqa: N806
+    zoomed = cv2.warpAffine(a, Z[:2], (w, h), flags=cv2.INTER_LINEAR)
+    gt = graffiti()[2] @ np.linalg.inv(Z)
+    H, info, res = _pipe("auto").homography(zoomed, b, return_matches=True)
+    (kept,) = [v for v in res.views if v["used"]]
+    assert kept["label"] != "plain" and kept["inliers"] < 0.1 * 1024, res.views
+    n = kept["matches"]
+    assert len(res) > 2 * n and res.timings["guided"] > 0
+    d = np.linalg.norm(affcorr.metrics.transfer(gt, res.corrs[n:, :2]) - res.corrs[n:, 2:4], axis=1)
+    assert np.mean(d < 3.0) >= 0.85
+    assert corner_error(H, gt, w, h) < 2.0
+    # A pair whose plain pass verifies with a strong yield is not grown.
+    upright = _pipe("auto").match_pair(a, b)
+    assert upright.views[0]["used"] and upright.timings["guided"] == 0

@@ -161,7 +161,8 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
         action=argparse.BooleanOptionalAction,
         default=PIPELINE_DEFAULTS["guided_matching"],
         help="add matches around the verified ones, predicted by their ACs and fitted to the "
-        "images (default: %(default)s)",
+        "images (default: %(default)s; the view cascade does it anyway for a pass it keeps "
+        "with few inliers)",
     )
     p.add_argument(
         "--views",

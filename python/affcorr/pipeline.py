@@ -115,7 +115,7 @@ class MatchResult:
         timings: seconds per stage: ``decode``, ``matcher``, ``detection``, ``matching``,
             ``patches``, ``shape_net``, ``affine_refine`` (0 unless enabled), ``views`` (the
             view cascade: verification and synthetic views, whose own stages are counted in
-            the stages above too), ``guided`` (guided re-matching, 0 unless enabled),
+            the stages above too), ``guided`` (guided re-matching, 0 unless it ran),
             ``ransac`` (0 unless estimated), ``total``.
         num_keypoints: keypoints (or semi-dense cells) found in image A and in image B.
         affine_confidence: ``(N,)`` float64 in [0, 1], the calibrated probability that each
@@ -214,7 +214,10 @@ class Pipeline:
             with a fundamental matrix and, when too few agree, matches synthetic views
             (rotations, zooms, ASIFT tilts) until one verifies, mapping every AC back through
             the view's warp; ``"full"`` tries every view and keeps the best; ``"off"`` the
-            plain pair only. Easy pairs cost one verification. See :attr:`MatchResult.views`.
+            plain pair only. Easy pairs cost one verification. When the pass it keeps
+            verifies with few inliers for the keypoint budget (under a tenth: a steep tilt's or
+            a zoom's), its matches are grown as by ``guided_matching``, so that they cover the
+            overlap. See :attr:`MatchResult.views`.
         view_budget: seconds after which the cascade starts no new view (None: no limit).
         view_relative_budget: the cascade starts no new view once it has done this many
             times the plain pass's work (the default: ``PIPELINE_DEFAULTS["view_relative_budget"]``;
@@ -235,7 +238,9 @@ class Pipeline:
             image A in image B from its nearest verified AC (x2 + A (p - x1)), fit it by the
             affine refinement and keep it when it is reliable and agrees with the verifying
             fundamental matrix; the new ACs follow the matcher's (timed as ``guided``). More
-            matches where the images overlap, without descriptors (docs/pipeline.md).
+            matches where the images overlap, without descriptors (docs/pipeline.md). Off (the
+            default), it still runs after a view cascade that kept a weakly verified pass
+            (``views``).
 
     Every model's ONNX contract is checked on loading.
 

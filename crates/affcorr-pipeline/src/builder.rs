@@ -256,7 +256,9 @@ impl PipelineBuilder {
 
     /// Guided re-matching: more matches around the verified ones, predicted by their ACs and
     /// fitted by the affine refinement (see [`crate::grow`]); `None` turns it off. Default:
-    /// [`defaults::GUIDED_MATCHING`]. Sparse matchers only.
+    /// [`defaults::GUIDED_MATCHING`]. Sparse matchers only. Off, it still runs (with
+    /// [`GrowOptions::default`]) after a view cascade that kept a pass verified with a weak
+    /// yield (see [`crate::views`]).
     pub fn guided_matching(mut self, options: Option<GrowOptions>) -> Self {
         self.guided_matching = options;
         self

@@ -47,7 +47,8 @@ pub const VIEW_MIN_INLIER_RATIO: f64 = 0.1;
 /// benches/results/views.md and benches/results/eval/extreme.md needed less.
 pub const VIEW_RELATIVE_BUDGET: Option<f64> = Some(30.0);
 
-/// Guided re-matching (more matches around the verified ones, `crate::grow`).
+/// Guided re-matching (more matches around the verified ones, `crate::grow`) of every pair. Off,
+/// the view cascade still grows a pass it keeps with a weak yield (`crate::views`).
 pub const GUIDED_MATCHING: bool = false;
 
 /// The seed of a dense matcher's balanced sampling and of the robust estimators.

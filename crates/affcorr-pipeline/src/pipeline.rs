@@ -485,7 +485,19 @@ impl Pipeline {
             timings.views += t.elapsed();
             r
         };
-        let work = match &self.guided_matching {
+        // Guided re-matching when asked for, and after the cascade when the pass it kept
+        // verified with a weak yield (`views::weak_yield`): a steep tilt's few matches cluster
+        // in a band of the overlap, and H extrapolates from them tens of pixels off
+        // (benches/results/eval/extreme_varied.md); grown from them, the matches spread over
+        // the plane.
+        let weak_kept = views
+            .iter()
+            .any(|v| v.used && v.verified && weak_yield(v.inliers, self.max_keypoints()));
+        let grow_options = self
+            .guided_matching
+            .clone()
+            .or_else(|| weak_kept.then(GrowOptions::default));
+        let work = match &grow_options {
             Some(o) if !dense => {
                 let t = Instant::now();
                 let w = self.guided(work, work_a, work_b, &fa.matcher, o)?;

@@ -49,6 +49,10 @@
 //! 3. Every AC of a view is mapped back to the original images with its A composed with the
 //!    synthetic warp ([`affcorr_image::ac_from_views`]), so the ACs are correct in the
 //!    original pixels whichever view produced them.
+//! 4. A kept pass (plain or synthetic) verified with a [`WEAK_YIELD`] is grown by guided
+//!    re-matching ([`crate::grow`]) in the original images: a steep tilt's or a zoom's few
+//!    matches cluster in part of the overlap, and a model fitted to them extrapolates badly
+//!    elsewhere (benches/results/eval/extreme_varied.md).
 //!
 //! [`crate::Matches::views`] reports each view tried: its warp, matches, inliers and time.
 
