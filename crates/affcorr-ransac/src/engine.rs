@@ -400,7 +400,6 @@ fn finish<P: Problem, Sc: Scoring>(
                     &LmOptions {
                         max_iterations: FINAL_LM_ITERATIONS,
                         noise_fraction: FINAL_NOISE_FRACTION,
-                        initial_damping: FINAL_INITIAL_DAMPING,
                         affine: with_affine,
                         ..Default::default()
                     },
@@ -452,11 +451,6 @@ const FINAL_LM_ITERATIONS: usize = 100;
 /// the default 0.01 stopped early enough to raise the median H error over the profile scenes
 /// (benches/results/ransac.md); 0.001 costs one more normal-equation pass on the inliers.
 const FINAL_NOISE_FRACTION: f64 = 0.001;
-/// The final refinement's [`LmOptions::initial_damping`]: it starts from local optimisation's
-/// model, near the optimum, where the Gauss–Newton step is the right one. With the default
-/// 1e-3 the homography's refinement took 6 steps (and its affine one 5–6 more) instead of 2,
-/// nearly a fifth of a homography estimate's instructions (callgrind, the `profile` example).
-const FINAL_INITIAL_DAMPING: f64 = 1e-9;
 /// The share of its starting score that the final refinement with affine terms may lose on the
 /// point residuals (see the engine's final refinement). The point-optimal model overfits the
 /// point noise by about dof·σ² in Σr², a fraction ~dof/N of the score; 1% covers it for N ≥ 10³
