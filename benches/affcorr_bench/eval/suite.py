@@ -27,8 +27,9 @@ MATCHES_VERSION = 1
 #: budget counts work, not time (default 30 plain passes of work). 4: a plain pass verified by fewer
 #: than CONFIDENT_VIEW x min_inliers is rivalled by every view (its AC-guided one after the
 #: rotations); tilts of 4 before the tiles. 5: a kept pass verified with a weak yield is grown by
-#: guided re-matching.
-AFFCORR_PIPELINE_REVISION = 5
+#: guided re-matching. 6: the verification's F refined as before 5 (only H's points-only
+#: refinement starts undamped).
+AFFCORR_PIPELINE_REVISION = 6
 #: Debian's OpenBLAS, unpacked by setup.sh (not installed: the machine's libblas stays as is).
 OPENBLAS = CACHE / "openblas" / "usr/lib/x86_64-linux-gnu/openblas-pthread"
 
