@@ -68,9 +68,9 @@ pub struct LmOptions {
     /// Default 1e-3, for starts that may be far from the optimum. Scaling by the diagonal does
     /// not undo correlations between the parameters: a homography's entries in pixel
     /// coordinates are so correlated that λ = 1e-3 shortened the Gauss–Newton step in the
-    /// flat directions by orders of magnitude, and LM crept to the optimum in 5–6 steps instead
-    /// of 1–2. A start known to be close on a convex cost (the homography's points-only
-    /// refinement from the linear fit) takes a smaller one.
+    /// flat directions, and LM crept to the optimum over several steps where one does. A start
+    /// known to be close on a convex cost (the homography's points-only refinement from the
+    /// linear fit) takes a smaller one.
     pub initial_damping: f64,
 }
 

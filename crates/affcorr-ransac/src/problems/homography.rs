@@ -51,13 +51,11 @@ impl<'a> HomographyProblem<'a> {
 /// The first damping of the refinement's points-only Levenberg–Marquardt
 /// ([`LmOptions::initial_damping`]). It starts from the linear fit on the inliers, close to
 /// the transfer-error optimum, where the Gauss–Newton step is the right one; in pixel
-/// coordinates H's entries are so correlated that the default 1e-3 shortened that step by
-/// orders of magnitude in the flat directions, and LM crept to the optimum in 6 steps instead
-/// of 2 (callgrind of the `profile` example: a fifth of an H estimate's instructions). The
-/// affine stage that follows keeps the default: its Cauchy terms make the cost non-convex, and
-/// with every stage of the final refinement (of H, F and the pose) starting undamped, single
-/// scenes' errors moved up to 3× either way (paired over 48 seeds per family of
-/// `scene_families`), where the points-only stage alone leaves them as they were.
+/// coordinates H's entries are so correlated that the default damping shortened that step in
+/// the flat directions and LM crept to the optimum. The affine stage that follows keeps the
+/// default: its Cauchy terms make the cost non-convex, and started undamped it moved single
+/// scenes' errors either way, where the points-only stage alone leaves them as they were
+/// (docs/estimation.md has the measurements).
 const POINT_REFINEMENT_DAMPING: f64 = 1e-9;
 
 impl HomographyProblem<'_> {
