@@ -502,9 +502,9 @@ mod tests {
         }
     }
 
-    #[test]
-    fn refinement_reaches_the_geometric_optimum_from_a_rough_fit() {
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(5);
+    /// `n` matches of one random plane with 1 px of noise on the points and no outliers.
+    fn one_plane(seed: u64, n: usize) -> Correspondences {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
         let scene = PlaneScene::random(&mut rng);
         let noise = NoiseModel {
             planes: 1,
@@ -512,8 +512,13 @@ mod tests {
             pixel_noise: 1.0,
             affine_noise: 0.0,
         };
-        let (acs, _) = noisy_correspondences(&mut rng, &scene, 200, &noise);
-        let data = Correspondences::from_acs(&acs).unwrap();
+        let (acs, _) = noisy_correspondences(&mut rng, &scene, n, &noise);
+        Correspondences::from_acs(&acs).unwrap()
+    }
+
+    #[test]
+    fn refinement_reaches_the_geometric_optimum_from_a_rough_fit() {
+        let data = one_plane(5, 200);
         let problem = HomographyProblem::new(&data, SampleKind::Points, 0.0);
         let all: Vec<usize> = (0..200).collect();
         // A rough start: the linear fit on 6 points. (On all 200 the linear fit is already
@@ -551,16 +556,7 @@ mod tests {
     fn a_start_near_the_optimum_takes_the_gauss_newton_step_with_little_damping() {
         // The final refinement's case: the linear fit on every inlier, a small step from the
         // geometric optimum, in pixel coordinates (a badly conditioned JᵀJ).
-        let mut rng = rand_pcg::Pcg64::seed_from_u64(8);
-        let scene = PlaneScene::random(&mut rng);
-        let noise = NoiseModel {
-            planes: 1,
-            outlier_ratio: 0.0,
-            pixel_noise: 1.0,
-            affine_noise: 0.0,
-        };
-        let (acs, _) = noisy_correspondences(&mut rng, &scene, 500, &noise);
-        let data = Correspondences::from_acs(&acs).unwrap();
+        let data = one_plane(8, 500);
         let problem = HomographyProblem::new(&data, SampleKind::Points, 0.0);
         let all: Vec<usize> = (0..500).collect();
         let linear = problem.fit_nonminimal(&all, None).unwrap();
