@@ -180,6 +180,20 @@ def test_a_plain_pass_verified_by_too_few_inliers_is_rivalled_by_the_view_they_g
     assert corner_error(H, gt, a.shape[1], a.shape[0]) < 2.0
 
 
+def test_a_weak_plain_pass_with_enough_inliers_to_keep_is_rivalled_by_its_guided_view_too():
+    # B foreshortened 3x across: the plain pair verifies with a few dozen of its matches, enough
+    # to be kept (at least 2 x min_inliers) but a weak yield for 1024 keypoints and under 60 %
+    # of the matches; after the rotations the view that undoes their map finds many times more.
+    a, tilted, gt = _tilted_b(3.0, 90.0)
+    H, info, res = _pipe("auto").homography(a, tilted, return_matches=True)
+    plain, *rivals, guided = res.views
+    assert plain["verified"] and 2 * 12 <= plain["inliers"] < 0.1 * 1024, res.views
+    assert rivals and all(v["label"].startswith("B rot") for v in rivals), res.views
+    assert guided["label"].endswith("guided") and guided["used"], res.views
+    assert guided["inliers"] > 5 * plain["inliers"]
+    assert corner_error(H, gt, a.shape[1], a.shape[0]) < 2.0
+
+
 def test_a_view_kept_with_a_weak_yield_is_grown_from_its_inliers():
     # A zoomed 4x into its centre: the zoom view that solves it verifies with a few dozen
     # inliers (a weak yield for 1024 keypoints), which guided re-matching grows, unasked.

@@ -28,8 +28,9 @@ MATCHES_VERSION = 1
 #: than CONFIDENT_VIEW x min_inliers is rivalled by every view (its AC-guided one after the
 #: rotations); tilts of 4 before the tiles. 5: a kept pass verified with a weak yield is grown by
 #: guided re-matching. 6: the verification's F refined as before 5 (only H's points-only
-#: refinement starts undamped).
-AFFCORR_PIPELINE_REVISION = 6
+#: refinement starts undamped). 7: a weak plain pass with enough inliers to be kept is rivalled
+#: by its AC-guided view too, after the rotations.
+AFFCORR_PIPELINE_REVISION = 7
 #: Debian's OpenBLAS, unpacked by setup.sh (not installed: the machine's libblas stays as is).
 OPENBLAS = CACHE / "openblas" / "usr/lib/x86_64-linux-gnu/openblas-pthread"
 

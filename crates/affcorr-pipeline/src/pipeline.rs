@@ -755,14 +755,17 @@ impl Pipeline {
         // after the rotations, which rival it first: a repetitive pattern matched at the
         // wrong rotation guides to a wrong view that verifies too (views_pose lost chessboard
         // and stereo pairs at 90–180° with the guide first). A failed plain pass's guide
-        // comes first.
+        // comes first. A weak pass with more inliers is rivalled by the rotations and then
+        // by its guide too: a tilt of 70° verifies the plain pass with a few dozen matches
+        // in a band of the overlap, and the view that undoes their map finds the plane
+        // (benches/results/eval/extreme_varied.md).
         let rivals_only = rival_floor > 0 && inliers >= CONFIDENT_VIEW * o.min_inliers;
         let mut steps: VecDeque<Step> = if rivals_only {
             VecDeque::from([Step::Screened(rival_views())])
         } else {
             cascade_steps().into()
         };
-        if let Some(g) = guided_view(&inlier_acs).filter(|_| !rivals_only) {
+        if let Some(g) = guided_view(&inlier_acs) {
             steps.insert(usize::from(weak), Step::View(g));
         }
         // The views of screened groups past their best: tried once every step has run.

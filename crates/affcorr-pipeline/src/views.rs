@@ -16,7 +16,9 @@
 //!    [`RIVAL_MARGIN`] times its inliers replaces it. Verified by fewer than
 //!    [`CONFIDENT_VIEW`] × min_inliers (too few to end the cascade on a synthetic view), it is
 //!    rivalled by every view of step 2, the one its inliers guide right after the rotations
-//!    (a steep tilt verifies with a dozen or two matches).
+//!    (a steep tilt verifies with a dozen or two matches); verified by more, by the rotations
+//!    and then the view its inliers guide (a 70° tilt verifies with a few dozen matches in a
+//!    band of the overlap).
 //! 2. If it fails (and [`ViewMode::Auto`]), synthetic views of one image are matched against
 //!    the other, in order, until one verifies ([`ViewMode::Full`] tries them all and keeps
 //!    the best), within [`ViewOptions::relative_budget`]:
