@@ -104,3 +104,49 @@ def test_extreme_names_a_bad_seed_list(seed, capsys):
         extreme.main(["--seed", seed])
     assert e.value.code == 2
     assert f"--seed takes comma-separated integers, got {seed!r}" in capsys.readouterr().err
+
+
+def _area_scale(H: np.ndarray) -> float:
+    """|det| of the homography's Jacobian at image 1's centre (640 x 480): its local zoom²."""
+    x = np.array([320.0, 240.0, 1.0])
+    return float(abs(np.linalg.det(H / H[2, 2]) / ((H[2] / H[2, 2]) @ x) ** 3))
+
+
+def test_extreme_pairs_zoom_only_when_asked():
+    (plain,) = data.extreme_pairs(tilts=(60,), images=1)
+    (same,) = data.extreme_pairs(tilts=(60,), images=1, scale_ratio=1.0)
+    assert same.id == plain.id and np.array_equal(same.H, plain.H)
+    assert np.array_equal(same.img2, plain.img2)
+    (zoomed,) = data.extreme_pairs(tilts=(60,), images=1, scale_ratio=9.0)
+    assert zoomed.id == plain.id + "-z9" and np.array_equal(zoomed.img1, plain.img1)
+    # The same cameras but camera 2's distance: the local area scale moves by a factor
+    # within 1/9..9 (the zoom's square), here by more than 2.
+    r = _area_scale(zoomed.H) / _area_scale(plain.H)
+    assert 2.0 < max(r, 1 / r) <= 9.0, r
+
+
+@pytest.mark.parametrize("ratio", ["0.5", "nan"])
+def test_extreme_names_a_bad_scale_ratio(ratio, capsys):
+    with pytest.raises(SystemExit) as e:
+        extreme.main(["--scale-ratio", ratio])
+    assert e.value.code == 2
+    assert "--scale-ratio must be at least 1" in capsys.readouterr().err
+
+
+def test_a_steep_tilt_seen_from_farther_is_solved_through_a_zoomed_tilt_view():
+    # Chelsea at 80° and 126° of roll, camera 2 farther away: the plane is shrunk about 2.6x
+    # along the tilt's axis and 14x across it in B. No view of the cascade at A's size
+    # matches it (0 matches before the zoomed tilts); A tilted by 4 and zoomed by 1/2, against
+    # B turned, does.
+    import affcorr
+
+    (q,) = [
+        p
+        for p in data.extreme_pairs((80,), 11, 2, every_held_out=True, scale_ratio=9.0)
+        if p.id == "x-chelsea-80-s11-z9"
+    ]
+    res = affcorr.Pipeline(threads=2).match_pair(q.img1, q.img2)
+    assert "zoom 0.5 tilt 4" in res.view["label"] and res.view["verified"], res.views
+    m = matchers.Matches(res.corrs[:, :2], res.corrs[:, 2:4], None, res.certainty, 0.0)
+    H, _ = extreme.opencv_homography(m)
+    assert extreme.overlap_error(H, q) < 10.0

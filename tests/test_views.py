@@ -131,20 +131,26 @@ def _rot(deg: float) -> np.ndarray:
     return np.array([[c, -s], [s, c]])
 
 
-def _tilted_b(t: float, direction_deg: float, turn_deg: float = 0.0):
-    """Graffiti's A and B' = W B with W = R(turn) T(t, direction): B compressed t times along
-    (sin direction, cos direction) after ASIFT's anti-aliasing blur, then turned; and the
-    homography A -> B'."""
+def _tilted_b(t: float, direction_deg: float, turn_deg: float = 0.0, zoom: float = 1.0):
+    """Graffiti's A and B' = W B with W = zoom R(turn) T(t, direction): B compressed t times
+    along (sin direction, cos direction) after ASIFT's anti-aliasing blur, then turned (and
+    scaled by ``zoom`` ≤ 1); and the homography A -> B'."""
     import cv2
 
     a = affcorr.read_gray_image(GRAF / "graf1.png")
     b = affcorr.read_gray_image(GRAF / "graf3.png")
-    M = _rot(turn_deg) @ _rot(direction_deg).T @ np.diag([1.0, 1.0 / t]) @ _rot(direction_deg)  # noqa: N806
+    M = (
+        zoom
+        * _rot(turn_deg)
+        @ _rot(direction_deg).T
+        @ np.diag([1.0, 1.0 / t])
+        @ _rot(direction_deg)
+    )  # noqa: N806
     h, w = b.shape
     corners = np.array([[0, 0], [w - 1, 0], [0, h - 1], [w - 1, h - 1]], float) @ M.T
     W = np.c_[M, -corners.min(0)]  # noqa: N806
     size = tuple(int(v) for v in np.ceil(np.ptp(corners, axis=0)) + 1)
-    blurred = cv2.GaussianBlur(b.astype(np.float32), (0, 0), 0.8 * np.sqrt(t * t - 1))
+    blurred = cv2.GaussianBlur(b.astype(np.float32), (0, 0), 0.8 * np.sqrt((t / zoom) ** 2 - 1))
     tilted = cv2.warpAffine(blurred, W, size, flags=cv2.INTER_LINEAR)
     return a, tilted, np.vstack([W, [0, 0, 1]]) @ graffiti()[2]
 

@@ -137,11 +137,14 @@ def extreme_pairs(
     images: int | None = None,
     size=(640, 480),
     every_held_out: bool = False,
+    scale_ratio: float = 1.0,
 ) -> list[Pair]:
     """One pair per held-out image and tilt of camera 2 (camera 1: tilt 0-10 deg; the same
     distance to the plane, so only the viewpoint changes the scale). The images are
     EXTREME_IMAGES, or with ``every_held_out`` every held-out texture; a seed other than 0
-    draws other cameras (and names the pairs ``...-s<seed>``)."""
+    draws other cameras (and names the pairs ``...-s<seed>``). ``scale_ratio`` > 1: camera 2's
+    distance differs too, by a zoom drawn log-uniformly within 1/sqrt(ratio)..sqrt(ratio) (and
+    the pairs are named ``...-z<ratio>``); 1 gives the same pairs as before it existed."""
     from affcorr.train.views import render_plane_views
 
     tex = _held_out()
@@ -154,9 +157,10 @@ def extreme_pairs(
             rng = np.random.default_rng([seed, int(t), sum(map(ord, name))])
             t1 = float(rng.uniform(0, 10))
             i1, i2, H = render_plane_views(
-                rng, tex[name], size=size, max_scale_ratio=1.0, tilts_deg=(t1, float(t))
+                rng, tex[name], size=size, max_scale_ratio=scale_ratio, tilts_deg=(t1, float(t))
             )
             stem = name.rsplit(".", 1)[0]
             pid = f"x-{stem}-{t}" + (f"-s{seed}" if seed else "")
+            pid += f"-z{scale_ratio:g}" if scale_ratio != 1.0 else ""
             pairs.append(Pair(pid, "extreme", _u8(i1), _u8(i2), H, {"tilt": t, "tilt1": t1}))
     return pairs

@@ -2,6 +2,7 @@
 
     .venv/bin/python -m affcorr_bench.eval.extreme [--max-keypoints 1024] [--tilts 50,60,70,80]
         [--images N] [--seed 0] [--every-held-out --seed 1,2 --out .../eval/extreme_varied]
+        [--scale-ratio R]
 
 Data (data.extreme_pairs): held-out real images on a plane, camera 1 facing it (tilt 0-10 deg),
 camera 2 at 50-80 deg tilt at the same distance (ASIFT's tilt t = 1/cos: 1.6 to 5.8), rendered
@@ -21,6 +22,9 @@ with its own 2-AC homography RANSAC on its ACs (affcorr.estimate_homography, 3 p
 The varied set (``--every-held-out --seed 1,2``): every held-out texture (six, two of them not
 in the experiment's four), each tilt, cameras and rolls drawn by other seeds: a check that what
 the cascade solves is not the four images' (benches/results/eval/extreme_varied.md).
+
+Tilt and zoom together (``--scale-ratio 9``): camera 2 also nearer or farther, a zoom of up to
+3x either way on top of the tilt, as in the EVD pairs (benches/results/eval/extreme_zoom.md).
 
 Writes benches/results/eval/extreme.{md,csv,png}.
 """
@@ -167,6 +171,12 @@ def main(argv=None) -> None:
         action="store_true",
         help="every held-out texture instead of the experiment's four",
     )
+    p.add_argument(
+        "--scale-ratio",
+        type=float,
+        default=1.0,
+        help="camera 2's zoom is drawn within 1/sqrt(R)..sqrt(R) (default 1: none)",
+    )
     p.add_argument("--methods", default=",".join(matchers.NAMES))
     p.add_argument("--out", default=str(suite.RESULTS / "extreme"))
     args = p.parse_args(argv)
@@ -176,6 +186,8 @@ def main(argv=None) -> None:
         seeds = []
     if not seeds:
         p.error(f"--seed takes comma-separated integers, got {args.seed!r}")
+    if not args.scale_ratio >= 1.0:
+        p.error(f"--scale-ratio must be at least 1, got {args.scale_ratio}")
     suite.use_openblas()
     t0 = time.time()
     tilts = [int(t) for t in args.tilts.split(",")]
@@ -185,7 +197,13 @@ def main(argv=None) -> None:
     pairs = [
         q
         for seed in seeds
-        for q in data.extreme_pairs(tilts, seed, args.images, every_held_out=args.every_held_out)
+        for q in data.extreme_pairs(
+            tilts,
+            seed,
+            args.images,
+            every_held_out=args.every_held_out,
+            scale_ratio=args.scale_ratio,
+        )
     ]
     rows = []
     for pair, name in progress([(q, n) for q in pairs for n in names], "extreme", "pair x method"):
@@ -218,7 +236,13 @@ def main(argv=None) -> None:
     notes = [
         f"Pairs: {len(pairs)} ({len(pairs) // len(tilts) // len(seeds)} held-out images x "
         f"tilts {tilts} deg x seeds {seeds}), "
-        f"640x480, at most {args.max_keypoints} keypoints per image. Wall "
+        "640x480"
+        + (
+            f", camera 2's zoom drawn within 1/{args.scale_ratio**0.5:g}-{args.scale_ratio**0.5:g}"
+            if args.scale_ratio != 1.0
+            else ""
+        )
+        + f", at most {args.max_keypoints} keypoints per image. Wall "
         f"time {time.time() - t0:.0f} s (cached matches are reused).",
         f"N: pairs whose estimated H is within {SUCCESS_PX:.0f} px of the ground truth on "
         "average over the overlap (a grid of image 1's points seen in both views; per tilt in "

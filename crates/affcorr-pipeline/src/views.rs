@@ -35,7 +35,8 @@
 //!    - then **screened groups** ([`Step::Screened`], [`screen`]): tilts t = 2 (4 directions)
 //!      of A and of B, each against the other image as it is and rotated by 270°, 90° and
 //!      180° (a steep tilt of a rotated pair needs both undone); tilts t = 4 (8 directions)
-//!      of A and of B against the rotations; **tiles** of B and of A: half-size tiles
+//!      of A and of B against the rotations, in one group with the same tilts zoomed by ½
+//!      (a steep tilt seen from farther away); **tiles** of B and of A: half-size tiles
 //!      magnified by 2 against the other image shrunk by ½ (3–6× zooms), one group ranked by
 //!      the screen but matched whole ([`Step::Ranked`]), then third-size tiles magnified by 3
 //!      against the other image as it is (6×), ranked the same. A group extracts each of
@@ -546,9 +547,10 @@ pub fn cascade_steps() -> Vec<Step> {
     let mut steps = vec![Step::Screened(rival_views())];
     steps.extend(single(vec![zoom(A, 0.5), zoom(B, 0.5)]));
     steps.extend(single(vec![zoom(A, 0.25), zoom(B, 0.25)]));
-    let tilts = |image, t: f64, n: usize| {
-        (0..n).map(move |k| ViewSpec::param(image, 0.0, 1.0, t, 180.0 * k as f64 / n as f64))
+    let zoomed_tilts = |image, s: f64, t: f64, n: usize| {
+        (0..n).map(move |k| ViewSpec::param(image, 0.0, s, t, 180.0 * k as f64 / n as f64))
     };
+    let tilts = move |image, t: f64, n: usize| zoomed_tilts(image, 1.0, t, n);
     // Tilts of one image against the other as it is and rotated by 270°, 90° and 180°: a
     // steep tilt of a rotated pair needs both undone at once, and the rotated images are the
     // rivals' (B) or shared by the group (A).
@@ -556,6 +558,11 @@ pub fn cascade_steps() -> Vec<Step> {
         [0.0, 270.0, 90.0, 180.0]
             .into_iter()
             .flat_map(move |r| tilts(image, t, n).map(move |v| v.with_other_rotation(r)))
+    };
+    let rotated_zoomed_tilts = |image, s: f64, t: f64, n: usize| {
+        [0.0, 270.0, 90.0, 180.0]
+            .into_iter()
+            .flat_map(move |r| zoomed_tilts(image, s, t, n).map(move |v| v.with_other_rotation(r)))
     };
     // Tiles of `image` magnified by `scale` (each 1/`scale` of its side), at every pair of
     // `starts` (fractions; x and y), against the other image zoomed by `other_scale`.
@@ -594,8 +601,18 @@ pub fn cascade_steps() -> Vec<Step> {
     // image runs before the other image's tiles are reached. The half-size tiles first: with
     // the third-size tiles first, a 6× zoom that only a half-size tile solves
     // (tests/views.rs) reached it near the budget, and failed on a loaded machine.
-    steps.push(Step::Screened(rotated_tilts(A, 4.0, 8).collect()));
-    steps.push(Step::Screened(rotated_tilts(B, 4.0, 8).collect()));
+    // Tilt 4 of an image at its size and zoomed by ½, in one group per image: a steep tilt
+    // seen from farther away (EVD's pairs; the tilt and zoom set of
+    // benches/results/eval/extreme_zoom.md) shrinks the plane across the tilt too, beyond
+    // the matcher's scale range, and the screen tells the zoomed view from the plain one as
+    // it tells the directions apart. The zoomed views are small: 1/16 of the pixels.
+    for image in [A, B] {
+        steps.push(Step::Screened(
+            rotated_tilts(image, 4.0, 8)
+                .chain(rotated_zoomed_tilts(image, 0.5, 4.0, 8))
+                .collect(),
+        ));
+    }
     steps.push(Step::Ranked(tiles(B).chain(tiles(A)).collect()));
     steps.push(Step::Ranked(third_tiles(B).chain(third_tiles(A)).collect()));
     steps
@@ -817,7 +834,9 @@ mod tests {
     #[test]
     fn candidates_cover_rotation_zoom_and_tilt_without_repeats() {
         let v = candidate_views();
-        assert_eq!(v.len(), 7 + 4 + 32 + 18 + 18 + 32 + 32);
+        // Rotations, zooms, tilt 2 of A and of B (4 directions × 4 rotations), tilt 4 of A
+        // and of B at their size and zoomed by ½ (8 directions × 4 rotations), the tiles.
+        assert_eq!(v.len(), 7 + 4 + 32 + 64 + 64 + 18 + 18);
         let labels: std::collections::BTreeSet<String> = v.iter().map(|s| s.label()).collect();
         assert_eq!(labels.len(), v.len());
         assert!(labels.contains("B rot 90°") && labels.contains("A zoom 0.25"));
@@ -826,6 +845,8 @@ mod tests {
             labels.contains("B tilt 4 @157.5°") && labels.contains("A tilt 4 @22.5° + B rot 90°")
         );
         assert!(labels.contains("B tilt 2 @45.0° + A rot 180°"));
+        assert!(labels.contains("A zoom 0.5 tilt 4 @112.5° + B rot 270°"));
+        assert!(labels.contains("B zoom 0.5 tilt 4 @0.0°"));
         assert!(labels.contains("B zoom 2 tile [0.5, 0.25; 1, 0.75] + A zoom 0.5"));
         assert!(labels.contains("A zoom 3 tile [0.33, 0; 0.67, 0.33]"));
         assert!(labels.contains("B zoom 3 tile [0, 0.67; 0.33, 1]"));
