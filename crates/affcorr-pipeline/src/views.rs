@@ -547,22 +547,16 @@ pub fn cascade_steps() -> Vec<Step> {
     let mut steps = vec![Step::Screened(rival_views())];
     steps.extend(single(vec![zoom(A, 0.5), zoom(B, 0.5)]));
     steps.extend(single(vec![zoom(A, 0.25), zoom(B, 0.25)]));
-    let zoomed_tilts = |image, s: f64, t: f64, n: usize| {
-        (0..n).map(move |k| ViewSpec::param(image, 0.0, s, t, 180.0 * k as f64 / n as f64))
-    };
-    let tilts = move |image, t: f64, n: usize| zoomed_tilts(image, 1.0, t, n);
-    // Tilts of one image against the other as it is and rotated by 270°, 90° and 180°: a
-    // steep tilt of a rotated pair needs both undone at once, and the rotated images are the
-    // rivals' (B) or shared by the group (A).
-    let rotated_tilts = |image, t: f64, n: usize| {
-        [0.0, 270.0, 90.0, 180.0]
-            .into_iter()
-            .flat_map(move |r| tilts(image, t, n).map(move |v| v.with_other_rotation(r)))
-    };
-    let rotated_zoomed_tilts = |image, s: f64, t: f64, n: usize| {
-        [0.0, 270.0, 90.0, 180.0]
-            .into_iter()
-            .flat_map(move |r| zoomed_tilts(image, s, t, n).map(move |v| v.with_other_rotation(r)))
+    // Tilts t of `image` in n directions (zoomed by s) against the other image as it is and
+    // rotated by 270°, 90° and 180°: a steep tilt of a rotated pair needs both undone at once,
+    // and the rotated images are the rivals' (B) or shared by the group (A).
+    let rotated_tilts = |image, s: f64, t: f64, n: usize| {
+        [0.0, 270.0, 90.0, 180.0].into_iter().flat_map(move |r| {
+            (0..n).map(move |k| {
+                ViewSpec::param(image, 0.0, s, t, 180.0 * k as f64 / n as f64)
+                    .with_other_rotation(r)
+            })
+        })
     };
     // Tiles of `image` magnified by `scale` (each 1/`scale` of its side), at every pair of
     // `starts` (fractions; x and y), against the other image zoomed by `other_scale`.
@@ -586,8 +580,8 @@ pub fn cascade_steps() -> Vec<Step> {
     // cameras (benches/results/eval/extreme_varied.md) never reached tilt 4. Tilt 4 first
     // costs a 4–6× zoom pair about 4 more plain passes of work (views.md).
     steps.push(Step::Screened(
-        rotated_tilts(A, 2.0, 4)
-            .chain(rotated_tilts(B, 2.0, 4))
+        rotated_tilts(A, 1.0, 2.0, 4)
+            .chain(rotated_tilts(B, 1.0, 2.0, 4))
             .collect(),
     ));
     // Stronger zooms (6×): the zoomed image's content is a sixth of the other's side, a third
@@ -608,8 +602,8 @@ pub fn cascade_steps() -> Vec<Step> {
     // it tells the directions apart. The zoomed views are small: 1/16 of the pixels.
     for image in [A, B] {
         steps.push(Step::Screened(
-            rotated_tilts(image, 4.0, 8)
-                .chain(rotated_zoomed_tilts(image, 0.5, 4.0, 8))
+            rotated_tilts(image, 1.0, 4.0, 8)
+                .chain(rotated_tilts(image, 0.5, 4.0, 8))
                 .collect(),
         ));
     }
