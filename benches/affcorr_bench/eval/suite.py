@@ -30,8 +30,9 @@ MATCHES_VERSION = 1
 #: guided re-matching. 6: the verification's F refined as before 5 (only H's points-only
 #: refinement starts undamped). 7: a weak plain pass with enough inliers to be kept is rivalled
 #: by its AC-guided view too, after the rotations. 8: the tilt-4 groups hold the tilts zoomed by
-#: 1/2 too.
-AFFCORR_PIPELINE_REVISION = 8
+#: 1/2 too. 9: the warps' directional blur computes its taps once away from the edges (the same
+#: views to float rounding).
+AFFCORR_PIPELINE_REVISION = 9
 #: Debian's OpenBLAS, unpacked by setup.sh (not installed: the machine's libblas stays as is).
 OPENBLAS = CACHE / "openblas" / "usr/lib/x86_64-linux-gnu/openblas-pthread"
 
