@@ -1,5 +1,6 @@
 //! Synthetic views (`affcorr::image::warp_image`): one 640×480 image under the warps the view
-//! cascade uses, in a rayon pool of 2 threads. A warp that shrinks blurs the source first
+//! cascade uses (each fitted to the view that holds the whole image, as the cascade fits
+//! them), in a rayon pool of 2 threads. A warp that shrinks blurs the source first
 //! (isotropically, then along the shrinking direction: ASIFT's anti-aliasing), and that blur
 //! is most of a tilt view's cost.
 //!
@@ -20,31 +21,6 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
 const THREADS: usize = 2;
-
-/// `linear` with the translation and size that hold the whole warped `w` × `h` image.
-fn framed(linear: AffineWarp, w: usize, h: usize) -> (AffineWarp, usize, usize) {
-    let corners = [
-        [0.0, 0.0],
-        [w as f64, 0.0],
-        [0.0, h as f64],
-        [w as f64, h as f64],
-    ];
-    let m = linear.m;
-    let mapped = corners.map(|[x, y]| [m[0] * x + m[1] * y, m[2] * x + m[3] * y]);
-    let lo = |k: usize| mapped.iter().map(|p| p[k]).fold(f64::INFINITY, f64::min);
-    let hi = |k: usize| {
-        mapped
-            .iter()
-            .map(|p| p[k])
-            .fold(f64::NEG_INFINITY, f64::max)
-    };
-    let warp = AffineWarp {
-        m,
-        c: [-lo(0), -lo(1)],
-    };
-    let size = |k: usize| (hi(k) - lo(k)).ceil() as usize;
-    (warp, size(0), size(1))
-}
 
 fn bench(c: &mut Criterion) {
     let mut rng = Pcg64::seed_from_u64(3);
@@ -70,7 +46,7 @@ fn bench(c: &mut Criterion) {
     group.warm_up_time(Duration::from_secs(1));
     group.measurement_time(Duration::from_secs(3));
     for (name, linear) in views {
-        let (warp, vw, vh) = framed(linear, w, h);
+        let (warp, vw, vh) = linear.fitted(w, h);
         group.bench_function(name, |b| {
             b.iter(|| pool.install(|| warp_image(black_box(&image), &warp, vw, vh).unwrap()))
         });

@@ -158,7 +158,7 @@ fn directional_blur(src: &[f32], w: usize, h: usize, sigma: f64, v: [f64; 2]) ->
             (offset, (dx - ix) as f32, (dy - iy) as f32, weight)
         })
         .collect();
-    let margin = |d: f64| (d.ceil() as usize + 1).max(1);
+    let margin = |d: f64| d.ceil() as usize + 1;
     let (mx, my) = (
         margin((r as f64) * v[0].abs()),
         margin((r as f64) * v[1].abs()),
