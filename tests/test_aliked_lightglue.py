@@ -192,8 +192,9 @@ def test_the_rust_runner_follows_the_specification(spec, pair):
         refine_affine=False,
         views="off",
         guided_matching=False,
+        detection_threshold=A.THRESHOLD,  # the specification's: upstream's default
     )
-    assert pipe.matcher == "aliked-lightglue"
+    assert pipe.matcher == "aliked-lightglue" and pipe.detection_threshold == A.THRESHOLD
     assert pipe.matcher_metadata["affcorr.contract"] == ALIKED_BACKBONE
     res = pipe.match_pair(a, b)  # the same gray float32 arrays as the specification
     assert res.num_keypoints == (TOP_K, TOP_K)
@@ -208,6 +209,26 @@ def test_the_rust_runner_follows_the_specification(spec, pair):
     got = np.asarray(feats.keypoints)
     assert len(got) == len(ref_kp)
     assert (L.correspond(ref_kp, got) >= 0).mean() >= 0.99
+
+
+def test_aliked_keeps_its_top_keypoints_where_upstreams_threshold_leaves_few(pair):
+    # Graffiti at a tenth of its contrast, as a texture-poor wall: few of ALIKED's scores pass
+    # upstream's 0.2; the pipeline's default keeps the budget's top scores instead, those
+    # above 0.2 among them (docs/matchers.md, benches/results/matchers_rooms.md).
+    import affcorr
+
+    if not _exported(bundled_models_dir()):
+        pytest.fail(f"the installed package lacks the ALIKED models: copy them from {MODELS}")
+    a = pair[0]
+    faint = (0.5 + 0.1 * (a - 0.5)).astype(np.float32)
+    options = dict(max_keypoints=TOP_K, threads=2, views="off")
+    default = affcorr.Pipeline("aliked-lightglue", **options)
+    assert default.detection_threshold == affcorr.PIPELINE_DEFAULTS["aliked_detection_threshold"]
+    upstream = affcorr.Pipeline("aliked-lightglue", detection_threshold=A.THRESHOLD, **options)
+    top, above = default.extract(faint), upstream.extract(faint)
+    assert len(top) == TOP_K and 0 < len(above) < TOP_K // 2, (len(top), len(above))
+    kept = L.correspond(np.asarray(above.keypoints), np.asarray(top.keypoints))
+    assert (kept >= 0).all()
 
 
 def test_a_missing_model_names_the_export_command(tmp_path):

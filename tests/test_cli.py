@@ -73,6 +73,21 @@ def test_bad_inputs_exit_2_with_a_message(graf, tmp_path, capsys):
     np.savez(tmp_path / "bad.npz", corrs=np.zeros((3, 8)))
     assert cli.main(["show", str(tmp_path / "bad.npz")]) == 2
     assert "missing arrays" in capsys.readouterr().err
+    out = str(tmp_path / "x.npz")
+    args = ["match", a, b, "-o", out, "--matcher", "xfeat-star", "--detection-threshold", "0.1"]
+    assert cli.main(args) == 2
+    assert "detection_threshold: the xfeat-star matcher" in capsys.readouterr().err
+
+
+def test_the_detection_threshold_reaches_the_matcher(graf, tmp_path):
+    a, b, _ = graf
+    common = ["--matcher", "xfeat", "--max-keypoints", "512", "--threads", "2", "--views", "off"]
+    counts = []
+    for extra in ([], ["--detection-threshold", "0.5"]):
+        out = tmp_path / f"acs{len(extra)}.npz"
+        assert cli.main(["match", a, b, "-o", str(out), *common, *extra]) == 0
+        counts.append(len(np.load(out)["corrs"]))
+    assert 0 < counts[1] < counts[0], counts
 
 
 def test_match_with_a_dense_model(graf, tmp_path):

@@ -89,6 +89,7 @@ def test_python_and_cli_defaults_are_the_rust_crates():
     assert set(d) == {
         "matcher",
         "max_keypoints",
+        "aliked_detection_threshold",
         "dense_matches",
         "refine_affine",
         "views",
@@ -107,6 +108,8 @@ def test_python_and_cli_defaults_are_the_rust_crates():
     assert init["views"].default == d["views"]
     assert init["view_relative_budget"].default == d["view_relative_budget"]
     assert init["guided_matching"].default == d["guided_matching"]
+    # None: the matcher's default, ALIKED's from the crate
+    assert init["detection_threshold"].default is None
     for method, key in [
         (affcorr.Pipeline.homography, "homography_threshold"),
         (affcorr.Pipeline.fundamental, "fundamental_threshold"),

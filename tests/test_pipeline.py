@@ -201,6 +201,23 @@ def test_max_matches_and_max_side():
     assert correct.sum() >= 170, correct.sum()
 
 
+def test_a_detection_threshold_keeps_only_the_stronger_keypoints():
+    default = affcorr.Pipeline("xfeat", max_keypoints=512, threads=2, views="off")
+    assert default.detection_threshold == 0.05  # XFeat's metadata, on its heatmap
+    strict = affcorr.Pipeline(
+        "xfeat", max_keypoints=512, threads=2, views="off", detection_threshold=0.5
+    )
+    assert strict.detection_threshold == 0.5
+    every, few = default.extract(A_PATH), strict.extract(A_PATH)
+    # (not a subset: XFeat ranks the budget by heatmap × reliability, the threshold is on the
+    # heatmap alone)
+    assert len(every) == 512 and 0 < len(few) < 512
+    # features of one threshold do not match under another
+    with pytest.raises(ValueError, match="features_a: .*detection_threshold"):
+        strict.match_features(every, every)
+    assert affcorr.Pipeline("xfeat-star", threads=1).detection_threshold is None
+
+
 def test_relative_pose_returns_the_estimator_types():
     K = np.array([[800.0, 0, 400], [0, 800, 320], [0, 0, 1]])
     pose, info, res = pipeline("xfeat").relative_pose(
@@ -266,6 +283,11 @@ def test_bad_options():
             affcorr.Pipeline("xfeat", **kw)
     with pytest.raises(ValueError, match="max_side"):
         affcorr.Pipeline("xfeat", max_side=16)
+    for bad in (float("nan"), float("inf"), True, "0.1"):
+        with pytest.raises(ValueError, match="detection_threshold must be a finite number"):
+            affcorr.Pipeline("xfeat", detection_threshold=bad)
+    with pytest.raises(ValueError, match="detection_threshold: the xfeat-star matcher keeps no"):
+        affcorr.Pipeline("xfeat-star", detection_threshold=0.1)
 
 
 def test_missing_models(tmp_path):

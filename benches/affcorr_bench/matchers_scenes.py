@@ -127,12 +127,16 @@ def runner(name: str, k: int, views: str = "off", defaults: bool = False):
 
 
 def upstream(extractor: str, k: int):
+    """Upstream torch with the runner's keypoint selection: ALIKED's top ``k`` (the
+    pipeline's ``detection_threshold`` for it), DISK's as upstream has it."""
+    import affcorr
     import torch
 
     from affcorr_bench.eval import matchers as M
 
     torch.set_num_threads(THREADS)
-    ex, lg = M._lightglue(extractor, k)
+    threshold = affcorr.PIPELINE_DEFAULTS["aliked_detection_threshold"]
+    ex, lg = M._lightglue(extractor, k, threshold if extractor == "aliked" else None)
 
     def run(a: np.ndarray, b: np.ndarray):
         t0 = time.perf_counter()
@@ -379,7 +383,10 @@ def write(args, rows, t_start, load0) -> None:
         f"'{DEFAULTS_ROW}' and '{DEFAULTS_ALIKED_ROW}' (the pipeline as constructed with "
         "nothing but its matcher, keypoints and threads: affine refinement and the view "
         "cascade on; s/pair the wall time of the whole match_pair, shape network and "
-        "refinement included).",
+        "refinement included). ALIKED's keypoints: the top ones by score, as the pipeline "
+        "keeps them by default (`detection_threshold` "
+        f"{affcorr.PIPELINE_DEFAULTS['aliked_detection_threshold']:g}; upstream torch with the "
+        "same `detection_threshold`; upstream's default 0.2 keeps only the scores above it).",
         "",
         "Pose sets: relative pose from the matches by affcorr's 5-point RANSAC on points (1 px "
         "Sampson, seed 0), AUC in percent of max(rotation, translation direction) error up to "

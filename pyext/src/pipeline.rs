@@ -46,6 +46,10 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     let d = PyDict::new(py);
     d.set_item("matcher", defaults::MATCHER.name())?;
     d.set_item("max_keypoints", defaults::MAX_KEYPOINTS)?;
+    d.set_item(
+        "aliked_detection_threshold",
+        defaults::ALIKED_DETECTION_THRESHOLD,
+    )?;
     d.set_item("dense_matches", defaults::DENSE_MATCHES)?;
     d.set_item("refine_affine", defaults::REFINE_AFFINE)?;
     d.set_item("views", defaults::VIEWS.name())?;
@@ -220,7 +224,7 @@ impl PipelineRunner {
         lighterglue_model = None, dense_model = None, disk_backbone_model = None,
         disk_lightglue_model = None, aliked_backbone_model = None,
         aliked_lightglue_model = None, ort_library = None, max_keypoints = None,
-        max_matches = None, max_side = None, threads = None, seed = None,
+        detection_threshold = None, max_matches = None, max_side = None, threads = None, seed = None,
         refine_affine = defaults::REFINE_AFFINE, drop_unreliable = false,
         guided_matching = defaults::GUIDED_MATCHING,
         views = None, view_budget = None,
@@ -241,6 +245,7 @@ impl PipelineRunner {
         aliked_lightglue_model: Option<PathBuf>,
         ort_library: Option<PathBuf>,
         max_keypoints: Option<&Bound<'_, PyAny>>,
+        detection_threshold: Option<f64>,
         max_matches: Option<&Bound<'_, PyAny>>,
         max_side: Option<&Bound<'_, PyAny>>,
         threads: Option<&Bound<'_, PyAny>>,
@@ -305,6 +310,14 @@ impl PipelineRunner {
         }
         if let Some(n) = max_keypoints {
             b = b.max_keypoints(to_usize(n));
+        }
+        if let Some(t) = detection_threshold {
+            if !t.is_finite() {
+                return Err(PyValueError::new_err(format!(
+                    "detection_threshold must be a finite number or None, got {t}"
+                )));
+            }
+            b = b.detection_threshold(t as f32);
         }
         if let Some(n) = max_matches {
             b = b.max_matches(to_usize(n));
@@ -570,6 +583,16 @@ impl PipelineRunner {
     #[getter]
     fn max_keypoints(&self) -> usize {
         self.inner.max_keypoints()
+    }
+
+    /// The score a keypoint needs in the detector's map, or None (no keypoints by score).
+    #[getter]
+    fn detection_threshold(&self) -> Option<f64> {
+        // The shortest decimal that round-trips the f32 (0.05, not 0.05000000074505806), so
+        // that it compares equal to what was passed.
+        self.inner
+            .detection_threshold()
+            .and_then(|t| t.to_string().parse().ok())
     }
 
     /// The cap on matches, or None.

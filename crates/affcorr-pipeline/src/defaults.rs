@@ -23,6 +23,18 @@ pub const MATCHER: Matcher = Matcher::XFeatLighterGlue;
 /// grows with the square of this number.
 pub const MAX_KEYPOINTS: usize = 1024;
 
+/// The score ALIKED's keypoints need: none (0, the scores are sigmoids), so that the top
+/// `max_keypoints` local maxima are kept, as DISK's are and as upstream runs ALIKED with
+/// `detection_threshold=0`. Upstream's default 0.2 left texture-poor rooms a few dozen
+/// matches (docs/matchers.md, benches/results/matchers_rooms.md).
+pub const ALIKED_DETECTION_THRESHOLD: f32 = 0.0;
+
+/// The pipeline's detection threshold for `matcher` ([`crate::PipelineBuilder::detection_threshold`]):
+/// [`ALIKED_DETECTION_THRESHOLD`] for ALIKED, `None` (the model's metadata) for the others.
+pub fn detection_threshold(matcher: Matcher) -> Option<f32> {
+    (matcher == Matcher::AlikedLightGlue).then_some(ALIKED_DETECTION_THRESHOLD)
+}
+
 /// Matches a dense matcher draws when `max_matches` is not set. DKM draws 10 000; each costs a
 /// shape-network evaluation and a refinement, so fewer by default.
 pub const DENSE_MATCHES: usize = 2000;

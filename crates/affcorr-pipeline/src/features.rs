@@ -27,15 +27,18 @@ pub struct Features {
     pub(crate) original_size: (usize, usize),
     /// The matcher's features of the working image.
     pub(crate) matcher: ImageFeatures,
-    /// The pipeline's keypoint budget and `max_side` (checked when matching).
+    /// The pipeline's keypoint budget, detection threshold and `max_side` (checked when
+    /// matching).
     pub(crate) max_keypoints: usize,
+    pub(crate) detection_threshold: Option<f32>,
     pub(crate) max_side: Option<usize>,
     /// Decoding (and downscaling) time.
     pub(crate) decode: Duration,
 }
 
 const MAGIC: &[u8; 4] = b"AFCF";
-const VERSION: u32 = 1;
+/// 2: the detection threshold after the keypoint budget.
+const VERSION: u32 = 2;
 
 impl Features {
     /// The matcher that computed them.
@@ -136,6 +139,7 @@ impl Features {
         w.u32(VERSION);
         w.str(self.matcher().name());
         w.u64(self.max_keypoints as u64);
+        w.f64(self.detection_threshold.map_or(f64::NAN, f64::from));
         w.u64(self.max_side.map_or(0, |s| s as u64));
         w.size(self.original_size);
         w.f64(self.scale[0]);
@@ -183,6 +187,8 @@ impl Features {
         }
         let matcher: Matcher = r.str()?.parse().map_err(|_| bad("unknown matcher name"))?;
         let max_keypoints = r.usize()?;
+        let threshold = r.f64()?;
+        let detection_threshold = (!threshold.is_nan()).then_some(threshold as f32);
         let max_side = match r.usize()? {
             0 => None,
             s => Some(s),
@@ -262,6 +268,7 @@ impl Features {
                 timings: MatcherTimings::default(),
             },
             max_keypoints,
+            detection_threshold,
             max_side,
             decode: Duration::ZERO,
         })
@@ -395,6 +402,7 @@ mod tests {
                 timings: MatcherTimings::default(),
             },
             max_keypoints: 10,
+            detection_threshold: (matcher != Matcher::Dense).then_some(0.25),
             max_side: Some(3),
             decode: Duration::ZERO,
         }

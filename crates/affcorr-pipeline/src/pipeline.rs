@@ -147,6 +147,12 @@ impl Pipeline {
         self.matcher.max_keypoints()
     }
 
+    /// The score a keypoint needs in the matcher's detector map (`None`: the matcher keeps no
+    /// keypoints by score); see [`crate::PipelineBuilder::detection_threshold`].
+    pub fn detection_threshold(&self) -> Option<f32> {
+        self.matcher.detection_threshold()
+    }
+
     /// The cap on matches, if any.
     pub fn max_matches(&self) -> Option<usize> {
         self.max_matches
@@ -438,6 +444,7 @@ impl Pipeline {
             original_size,
             matcher,
             max_keypoints: self.max_keypoints(),
+            detection_threshold: self.detection_threshold(),
             max_side: self.max_side,
             decode,
         })
@@ -448,18 +455,21 @@ impl Pipeline {
         for (f, what) in [(fa, "features_a"), (fb, "features_b")] {
             if f.matcher() != self.matcher()
                 || f.max_keypoints != self.max_keypoints()
+                || f.detection_threshold != self.detection_threshold()
                 || f.max_side != self.max_side
             {
                 return Err(PipelineError::invalid(
                     what,
                     format!(
-                        "extracted with matcher {}, max_keypoints {}, max_side {:?}; this \
-                         pipeline has {}, {}, {:?}",
+                        "extracted with matcher {}, max_keypoints {}, detection_threshold \
+                         {:?}, max_side {:?}; this pipeline has {}, {}, {:?}, {:?}",
                         f.matcher(),
                         f.max_keypoints,
+                        f.detection_threshold,
                         f.max_side,
                         self.matcher(),
                         self.max_keypoints(),
+                        self.detection_threshold(),
                         self.max_side
                     ),
                 ));

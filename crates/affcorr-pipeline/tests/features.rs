@@ -98,6 +98,58 @@ fn features_of_another_configuration_are_refused() {
 }
 
 #[test]
+fn a_detection_threshold_keeps_fewer_keypoints_and_its_features_apart() {
+    let dir = common::root().join("data/graffiti");
+    let image = dir.join("graf1.png");
+    let p = pipeline(Matcher::XFeatMnn, ViewMode::Off, 1);
+    // XFeat's metadata: 0.05 on its heatmap (probabilities); the budget of 128 is full.
+    assert_eq!(p.detection_threshold(), Some(0.05));
+    let all = p.extract(image.as_path()).unwrap();
+    assert_eq!(all.len(), 128);
+    let with = |threshold: f32| {
+        common::init();
+        Pipeline::builder()
+            .matcher(Matcher::XFeatMnn)
+            .models_dir(common::models_dir())
+            .max_keypoints(128)
+            .max_side(192)
+            .detection_threshold(threshold)
+            .threads(1)
+            .build()
+    };
+    let strict = with(0.5).unwrap();
+    assert_eq!(strict.detection_threshold(), Some(0.5));
+    let few = strict.extract(image.as_path()).unwrap();
+    assert!(
+        !few.is_empty() && few.len() < all.len(),
+        "{} keypoints",
+        few.len()
+    );
+    let e = strict.match_features(&all, &all).unwrap_err().to_string();
+    assert!(e.contains("detection_threshold Some(0.05)"), "{e}");
+    let e = with(f32::NAN).unwrap_err().to_string();
+    assert!(
+        e.starts_with("detection_threshold: must be a finite number"),
+        "{e}"
+    );
+    let e = Pipeline::builder()
+        .matcher(Matcher::XFeatStar)
+        .models_dir(common::models_dir())
+        .detection_threshold(0.1)
+        .build()
+        .unwrap_err()
+        .to_string();
+    assert!(
+        e.starts_with("detection_threshold: the xfeat-star matcher"),
+        "{e}"
+    );
+    assert_eq!(
+        pipeline(Matcher::XFeatStar, ViewMode::Off, 1).detection_threshold(),
+        None
+    );
+}
+
+#[test]
 fn match_pairs_reuses_shared_images_with_match_pair_results() {
     let dir = common::root().join("data/graffiti");
     let (a, b) = (dir.join("graf1.png"), dir.join("graf3.png"));

@@ -121,9 +121,14 @@ impl AlikedBackbone {
         })
     }
 
-    /// The detection parameters from the metadata.
+    /// The detection parameters (the metadata's, unless [`Self::set_detection_threshold`]).
     pub fn config(&self) -> &AlikedConfig {
         &self.config
+    }
+
+    /// Keypoints need a score above `threshold` from now on, instead of the metadata's.
+    pub fn set_detection_threshold(&mut self, threshold: f32) {
+        self.config.threshold = threshold;
     }
 
     /// All custom metadata of the backbone.

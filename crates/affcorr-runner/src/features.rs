@@ -127,9 +127,14 @@ impl Backbone {
         })
     }
 
-    /// The detection parameters from the metadata.
+    /// The detection parameters (the metadata's, unless [`Self::set_detection_threshold`]).
     pub fn config(&self) -> &BackboneConfig {
         &self.config
+    }
+
+    /// Keypoints need a score above `threshold` from now on, instead of the metadata's.
+    pub fn set_detection_threshold(&mut self, threshold: f32) {
+        self.config.threshold = threshold;
     }
 
     /// All custom metadata of the model.

@@ -458,6 +458,55 @@ impl PointMatcher {
         self.seed
     }
 
+    /// The score a keypoint needs (above it) in the detector's map: XFeat's heatmap (the
+    /// metadata's 0.05), DISK's logits (0) or ALIKED's scores (upstream's 0.2). `None` for the
+    /// matchers that keep no keypoints by score (`"xfeat-star"`, `"dense"`). Over the keypoint
+    /// budget the highest scores are kept either way, so 0 (DISK's) keeps the top
+    /// `max_keypoints` of the local maxima.
+    pub fn detection_threshold(&self) -> Option<f32> {
+        match self.kind {
+            Matcher::XFeatMnn | Matcher::XFeatLighterGlue => Some(self.xfeat().config().threshold),
+            Matcher::DiskLightGlue => self.disk.as_ref().map(|d| d.config().threshold),
+            Matcher::AlikedLightGlue => self.aliked.as_ref().map(|a| a.config().threshold),
+            Matcher::XFeatStar | Matcher::Dense => None,
+        }
+    }
+
+    /// Keypoints need a score above `threshold` ([`Self::detection_threshold`]) from now on.
+    /// An error names `detection_threshold` when it is not finite, or when the matcher keeps
+    /// no keypoints by score.
+    pub fn set_detection_threshold(&mut self, threshold: f32) -> Result<()> {
+        if !threshold.is_finite() {
+            return Err(RunnerError::invalid(
+                "detection_threshold",
+                format!("must be a finite number, got {threshold}"),
+            ));
+        }
+        match (
+            self.kind,
+            &mut self.backbone,
+            &mut self.disk,
+            &mut self.aliked,
+        ) {
+            (Matcher::XFeatMnn | Matcher::XFeatLighterGlue, Some(b), _, _) => {
+                b.set_detection_threshold(threshold)
+            }
+            (Matcher::DiskLightGlue, _, Some(d), _) => d.set_detection_threshold(threshold),
+            (Matcher::AlikedLightGlue, _, _, Some(a)) => a.set_detection_threshold(threshold),
+            _ => {
+                return Err(RunnerError::invalid(
+                    "detection_threshold",
+                    format!(
+                        "the {} matcher keeps no keypoints by score (it applies to \"xfeat\", \
+                         \"xfeat-lighterglue\", \"disk-lightglue\" and \"aliked-lightglue\")",
+                        self.kind
+                    ),
+                ));
+            }
+        }
+        Ok(())
+    }
+
     /// The XFeat backbone (`None` for a dense matcher, DISK and ALIKED).
     pub fn backbone(&self) -> Option<&Backbone> {
         self.backbone.as_ref()

@@ -123,6 +123,7 @@ def run(
     *,
     matcher: str | None = None,
     max_keypoints: int | None = None,
+    detection_threshold: float | None = None,
     max_matches: int | None = None,
     max_side: int | None = None,
     views: str | None = None,
@@ -210,6 +211,7 @@ def run(
     for k, v in (
         ("matcher", matcher),
         ("max_keypoints", max_keypoints),
+        ("detection_threshold", detection_threshold),
         ("max_matches", max_matches),
         ("max_side", max_side),
         ("views", views),
@@ -225,6 +227,7 @@ def run(
     pipeline_kwargs.update(
         matcher=probe.matcher,
         max_keypoints=probe.max_keypoints,
+        detection_threshold=probe.detection_threshold,
         max_matches=probe.max_matches,
         max_side=probe.max_side,
         views=probe.views,
