@@ -150,3 +150,30 @@ def test_a_steep_tilt_seen_from_farther_is_solved_through_a_zoomed_tilt_view():
     m = matchers.Matches(res.corrs[:, :2], res.corrs[:, 2:4], None, res.certainty, 0.0)
     H, _ = extreme.opencv_homography(m)
     assert extreme.overlap_error(H, q) < 10.0
+
+
+def test_affcorrs_cached_matches_are_keyed_by_its_sources(tmp_path, monkeypatch):
+    # A change to the Rust sources (an experiment not landed, a revision number reused) must
+    # not serve the matches an earlier build cached; the peers' keys do not depend on them.
+    from affcorr_bench.eval import suite
+
+    (tmp_path / "crates/affcorr-x/src").mkdir(parents=True)
+    source = tmp_path / "crates/affcorr-x/src/lib.rs"
+    source.write_text("fn a() {}")
+    (tmp_path / "Cargo.lock").write_text("lock")
+    monkeypatch.setattr(suite.common, "ROOT", tmp_path)
+    pair = data.Pair("p", "extreme", np.zeros((2, 2), np.uint8), np.ones((2, 2), np.uint8), None)
+
+    def keys():
+        suite.pipeline_source_digest.cache_clear()
+        return suite._key(pair, "affcorr", 64).name, suite._key(pair, "sift", 64).name
+
+    try:
+        first = keys()
+        assert first[0].endswith(f"-src{suite.pipeline_source_digest()}.npz")
+        assert keys() == first
+        source.write_text("fn a() { b() }")
+        second = keys()
+        assert second[0] != first[0] and second[1] == first[1] == "sift-k64.npz"
+    finally:
+        suite.pipeline_source_digest.cache_clear()

@@ -5,6 +5,7 @@ helpers are affcorr_bench.common's."""
 from __future__ import annotations
 
 import datetime
+import functools
 import hashlib
 import os
 import platform
@@ -33,6 +34,10 @@ MATCHES_VERSION = 1
 #: 1/2 too. 9: the warps' directional blur computes its taps once away from the edges (the same
 #: views to float rounding).
 AFFCORR_PIPELINE_REVISION = 9
+#: The Rust sources that make affcorr's matches (and Cargo.lock, which pins ONNX Runtime's
+#: bindings and the rest): their digest is in affcorr's cache keys too, so an experiment on the
+#: cascade that is not landed (or a revision number used twice) never serves stale matches.
+PIPELINE_SOURCES = ("crates/*/src/**/*.rs", "Cargo.lock")
 #: Debian's OpenBLAS, unpacked by setup.sh (not installed: the machine's libblas stays as is).
 OPENBLAS = CACHE / "openblas" / "usr/lib/x86_64-linux-gnu/openblas-pthread"
 
@@ -53,13 +58,29 @@ def use_openblas() -> None:
     os.execve(sys.executable, [sys.executable, *argv, *sys.argv[1:]], common.child_env(env))
 
 
+@functools.cache
+def pipeline_source_digest() -> str:
+    """10 hex digits of the SHA-1 of PIPELINE_SOURCES (paths and contents, in path order); ""
+    outside a checkout."""
+    files = sorted({f for pattern in PIPELINE_SOURCES for f in common.ROOT.glob(pattern)})
+    if not files:
+        return ""
+    h = hashlib.sha1()
+    for f in files:
+        h.update(str(f.relative_to(common.ROOT)).encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()[:10]
+
+
 def _key(pair, name: str, max_keypoints: int) -> Path:
     h = hashlib.sha1(pair.img1.tobytes() + pair.img2.tobytes()).hexdigest()[:10]
     folder = CACHE / "matches" / f"v{MATCHES_VERSION}" / f"{pair.id}-{h}"
     # affcorr's matches depend on its shape model and on its pipeline's code too.
     tag = ""
     if name == "affcorr":
-        tag = f"-shape{matchers.shape_model_tag()}-p{AFFCORR_PIPELINE_REVISION}"
+        tag = (
+            f"-shape{matchers.shape_model_tag()}-p{AFFCORR_PIPELINE_REVISION}"
+            f"-src{pipeline_source_digest()}"
+        )
     return folder / f"{name}-k{max_keypoints}{tag}.npz"
 
 
