@@ -100,3 +100,20 @@ def test_a_count_below_one_is_named(flag, capsys):
         sf.main([flag, "0"])
     assert e.value.code == 2
     assert f"{flag} must be at least 1, got 0" in capsys.readouterr().err
+
+
+def test_the_sampson_threshold_follows_the_noise_above_its_floor():
+    fams = [f for f in sf.FAMILIES if f[0] in ("px 0.25", "px 2")]
+    jobs = sf.make_jobs(["relpose", "homography"], fams, 1, 50, sampson=(2.0, 0.75))
+    thr = {(j["problem"], j["family"]): j["thr"] for j in jobs}
+    assert thr[("relpose", "px 0.25")] == 0.75 and thr[("relpose", "px 2")] == 4.0
+    assert thr[("homography", "px 2")] == 7.0  # H keeps its own rule
+    default = sf.make_jobs(["relpose"], fams, 1, 50)
+    assert [j["thr"] for j in default] == [1.5, 5.0]
+
+
+@pytest.mark.parametrize("flag", ["--sampson-sigmas", "--sampson-floor"])
+def test_a_threshold_that_is_not_positive_is_named(flag, capsys):
+    with pytest.raises(SystemExit) as e:
+        sf.main([flag, "0"])
+    assert e.value.code == 2 and "--sampson-sigmas and --sampson-floor" in capsys.readouterr().err
