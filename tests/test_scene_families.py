@@ -117,3 +117,24 @@ def test_a_threshold_that_is_not_positive_is_named(flag, capsys):
     with pytest.raises(SystemExit) as e:
         sf.main([flag, "0"])
     assert e.value.code == 2 and "--sampson-sigmas and --sampson-floor" in capsys.readouterr().err
+
+
+def test_heavy_tails_widen_a_share_of_the_inliers_and_leave_the_others_alone():
+    s = {**sf.BASE, "px": 1.0, "aff": 0.0, "outliers": 0.0}
+    gauss = sf.make_scene(np.random.default_rng(4), "homography", 4000, s)
+    tails = sf.make_scene(np.random.default_rng(4), "homography", 4000, {**s, "tails": 0.3})
+
+    def transfer_residuals(sc):
+        q = np.c_[sc["corrs"][:, :2], np.ones(len(sc["corrs"]))] @ sc["H"].T
+        return q[:, :2] / q[:, 2:] - sc["corrs"][:, 2:4]
+
+    # 70 % of the inliers at 1 px and 30 % at TAIL_SCALE px: 0.7 + 0.3 * 16 = 5.5 times the
+    # Gaussian scene's variance, and residuals beyond 6 px (4 sigma of the Gaussian's ~1.5)
+    ratio = np.var(transfer_residuals(tails)) / np.var(transfer_residuals(gauss))
+    assert 4.8 < ratio < 6.2, ratio
+    beyond = [np.mean(np.abs(transfer_residuals(sc)) > 4 * 1.5) for sc in (gauss, tails)]
+    assert beyond[0] < 0.005 and beyond[1] > 0.05, beyond
+    # A scene without tails draws nothing more: the same scene as before the option.
+    again = sf.make_scene(np.random.default_rng(4), "homography", 4000, {**s, "tails": 0.0})
+    np.testing.assert_array_equal(gauss["corrs"], again["corrs"])
+    assert [f[0] for f in sf.EXTRA_FAMILIES] == ["tails 10%", "tails 30%"]
