@@ -21,13 +21,15 @@ The generator is this module's own (``make_scene``), not the peer harness's or t
 - 1-8 planes through points near the centre with random tilts (up to 60 degrees), each seen in
   a random rectangle of image 1; the true A of each match is the Jacobian of its plane's
   homography at x1;
-- Gaussian noise of ``px`` pixels on x1 and on x2, relative noise ``aff`` on A
+- Gaussian noise of ``px`` pixels on x1 and on x2 (with ``tails``, that share of the inliers
+  at TAIL_SCALE x ``px``: EXTRA_FAMILIES), relative noise ``aff`` on A
   (A <- A (I + aff N), N standard normal), and a fraction ``outliers`` of matches replaced by
   random points in both images with random affine shapes (scale 0.5-2, any rotation,
   anisotropy 0.6-1.6, shear up to 0.3).
 
 Each family changes one or a few settings of the base scene; the threshold follows the noise
-(max(1.5, 2.5 px) on the Sampson distance, max(2, 3.5 px) on the transfer error). Errors:
+(max(1.5, 2.5 px) on the Sampson distance unless ``--sampson-sigmas`` / ``--sampson-floor``,
+max(2, 3.5 px) on the transfer error). Errors:
 relative pose and F (decomposed with K into E and a pose with cheirality on its inliers): the
 rotation and translation-direction errors in degrees (a failure counts as 180); H: the mean
 transfer error over a grid of image 1 against the true H, px (a failure counts as 1000).
