@@ -34,10 +34,11 @@ MATCHES_VERSION = 1
 #: 1/2 too. 9: the warps' directional blur computes its taps once away from the edges (the same
 #: views to float rounding).
 AFFCORR_PIPELINE_REVISION = 9
-#: The Rust sources that make affcorr's matches (and Cargo.lock, which pins ONNX Runtime's
-#: bindings and the rest): their digest is in affcorr's cache keys too, so an experiment on the
-#: cascade that is not landed (or a revision number used twice) never serves stale matches.
-PIPELINE_SOURCES = ("crates/*/src/**/*.rs", "Cargo.lock")
+#: The Rust sources that make affcorr's matches, Cargo.lock (which pins ONNX Runtime's
+#: bindings and the rest) and the matcher's models (the shape model is in its own tag): their
+#: digest is in affcorr's cache keys too, so an experiment on the cascade that is not landed (or
+#: a revision number used twice) never serves stale matches.
+PIPELINE_SOURCES = ("crates/*/src/**/*.rs", "Cargo.lock", "python/affcorr/models/xfeat_*.onnx")
 #: Debian's OpenBLAS, unpacked by setup.sh (not installed: the machine's libblas stays as is).
 OPENBLAS = CACHE / "openblas" / "usr/lib/x86_64-linux-gnu/openblas-pthread"
 
