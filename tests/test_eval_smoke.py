@@ -175,5 +175,9 @@ def test_affcorrs_cached_matches_are_keyed_by_its_sources(tmp_path, monkeypatch)
         source.write_text("fn a() { b() }")
         second = keys()
         assert second[0] != first[0] and second[1] == first[1] == "sift-k64.npz"
+        # the matcher's models too
+        (tmp_path / "python/affcorr/models").mkdir(parents=True)
+        (tmp_path / "python/affcorr/models/xfeat_backbone.onnx").write_bytes(b"weights")
+        assert keys()[0] not in (first[0], second[0])
     finally:
         suite.pipeline_source_digest.cache_clear()
