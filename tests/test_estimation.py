@@ -96,8 +96,14 @@ def transfer_error(H, Hgt, x1) -> float:
 
 @pytest.mark.parametrize(
     "columns, options",
-    [(8, {}), (4, {}), (8, {"sample": "points"}), (8, {"affine_weight": 50.0})],
-    ids=["ac", "points", "ac-data-point-samples", "ac-affine-scoring"],
+    [
+        (8, {}),
+        (4, {}),
+        (8, {"sample": "points"}),
+        (8, {"affine_weight": 50.0}),
+        (8, {"sample": "hybrid"}),
+    ],
+    ids=["ac", "points", "ac-data-point-samples", "ac-affine-scoring", "hybrid-samples"],
 )
 def test_homography_accuracy(h_data, columns, options):
     scene, exact, corrs, truth = h_data
@@ -110,10 +116,14 @@ def test_homography_accuracy(h_data, columns, options):
     assert info.num_iterations >= 1 and info.score > 0
 
 
-@pytest.mark.parametrize("columns", [8, 4], ids=["ac", "points"])
-def test_fundamental_accuracy(e_data, columns):
+@pytest.mark.parametrize(
+    "columns, options",
+    [(8, {}), (4, {}), (8, {"sample": "hybrid"})],
+    ids=["ac", "points", "hybrid"],
+)
+def test_fundamental_accuracy(e_data, columns, options):
     scene, exact, corrs, truth = e_data
-    F, info = affcorr.estimate_fundamental(corrs[:, :columns], threshold=E_THRESHOLD)
+    F, info = affcorr.estimate_fundamental(corrs[:, :columns], threshold=E_THRESHOLD, **options)
     assert abs(np.linalg.norm(F) - 1) < 1e-9
     assert abs(np.linalg.det(F)) < 1e-10
     assert recall(info.inliers, truth) >= 0.99
@@ -122,11 +132,15 @@ def test_fundamental_accuracy(e_data, columns):
     assert np.median(np.sqrt(d)) < 0.5
 
 
-@pytest.mark.parametrize("columns", [8, 4], ids=["ac", "points"])
-def test_relative_pose_accuracy(e_data, columns):
+@pytest.mark.parametrize(
+    "columns, options",
+    [(8, {}), (4, {}), (8, {"sample": "hybrid"})],
+    ids=["ac", "points", "hybrid"],
+)
+def test_relative_pose_accuracy(e_data, columns, options):
     scene, exact, corrs, truth = e_data
     pose, info = affcorr.estimate_relative_pose(
-        corrs[:, :columns], scene.K1, scene.K2, threshold=E_THRESHOLD
+        corrs[:, :columns], scene.K1, scene.K2, threshold=E_THRESHOLD, **options
     )
     assert angle_deg(pose.R @ scene.R.T) < 0.5
     assert vec_angle_deg(pose.t, scene.t) < 3.0
@@ -401,9 +415,10 @@ BAD_INPUTS = [
     ("quality NaN", dict(sampler="prosac", quality=np.full(30, np.nan)), r"quality\[0\]"),
     ("quality shape", dict(sampler="prosac", quality=np.ones((30, 2))), "quality must have shape"),
     ("affine on points", dict(corrs=GOOD[:, :4], sample="affine"), "sample = affine.*\\(N, 8\\)"),
+    ("hybrid on points", dict(corrs=GOOD[:, :4], sample="hybrid"), "sample = hybrid.*\\(N, 8\\)"),
     ("affine weight on points", dict(corrs=GOOD[:, :4], affine_weight=1.0), "affine_weight"),
     ("affine weight < 0", dict(affine_weight=-1.0), "affine_weight"),
-    ("bad sample", dict(sample="lines"), r"sample must be one of \['affine', 'points'\]"),
+    ("bad sample", dict(sample="lines"), r"sample must be one of \['affine', 'points', 'hybrid'\]"),
     ("bad sampler", dict(sampler="magic"), "sampler must be one of"),
     ("bad scoring", dict(scoring="ransac"), "scoring must be one of"),
     ("confidence 1", dict(confidence=1.0), "confidence"),

@@ -96,6 +96,23 @@ def test_two_ac_recovers_ground_truth_one_and_two_planes():
     assert first >= 0.97 * 200
 
 
+def test_one_ac_and_two_points_recover_ground_truth():
+    """The hybrid sample: the AC on a plane, the two points anywhere in the scene."""
+    rng = np.random.default_rng(5)
+    errors = []
+    for _ in range(200):
+        R, t, E, K1, K2 = scene(rng)
+        corr = plane_acs(rng, R, t, K1, K2, 1)
+        x1, x2 = points(rng, R, t, K1, K2, 2)
+        models = affcorr.essential_1ac2pt(corr, x1, x2)
+        assert len(models) <= 10
+        errors.append(best_error(models, E))
+    assert np.mean(np.array(errors) < 1e-8) >= 0.99
+    # A point at the AC's centre adds no equation.
+    at_centre = np.vstack([x1[0], corr[0, :2]]), np.vstack([x2[0], corr[0, 2:4]])
+    assert affcorr.essential_1ac2pt(corr, *at_centre) == []
+
+
 def test_eight_point_and_lsq():
     rng = np.random.default_rng(2)
     for _ in range(50):
@@ -144,6 +161,10 @@ def test_degenerate_samples_give_no_model():
     assert affcorr.essential_8pt(p[:, :2], p[:, 2:4]) == []  # coplanar
 
 
+def hybrid(corr, x1, x2):
+    return affcorr.essential_1ac2pt(corr, x1, x2)
+
+
 @pytest.mark.parametrize(
     "call, name",
     [
@@ -166,6 +187,9 @@ def test_degenerate_samples_give_no_model():
             "corrs",
         ),
         (lambda: affcorr.essential_5pt("abc", np.zeros((5, 2))), "x1"),
+        (lambda: hybrid(np.zeros((2, 8)), np.zeros((2, 2)), np.zeros((2, 2))), "corr"),
+        (lambda: hybrid(np.zeros((1, 8)), np.zeros((3, 2)), np.zeros((2, 2))), "x1"),
+        (lambda: hybrid(np.zeros((1, 8)), np.zeros((2, 2)), np.full((2, 2), np.nan)), "x2"),
     ],
 )
 def test_bad_inputs_raise_value_error_naming_the_argument(call, name):

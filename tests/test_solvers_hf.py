@@ -107,6 +107,11 @@ def test_homography_solvers_recover_ground_truth():
         p = s.plane()
         return best(affcorr.homography_1ac_given_f(s.acs(p, 1), s.F), s.homography(p))
 
+    def hybrid(s):
+        p = s.plane()
+        c = s.acs(p, 3)
+        return best(affcorr.homography_1ac2pt(c[:1], c[1:, :2], c[1:, 2:4]), s.homography(p))
+
     def lsq(s):
         p = s.plane()
         c = s.acs(p, 25)
@@ -115,7 +120,7 @@ def test_homography_solvers_recover_ground_truth():
             best(affcorr.homography_ac_lsq(c), s.homography(p)),
         )
 
-    for seed, fn in enumerate([four_pt, two_ac, one_ac_f, lsq]):
+    for seed, fn in enumerate([four_pt, two_ac, one_ac_f, lsq, hybrid]):
         assert success_rate(seed, fn) >= 0.99, fn.__name__
 
 
@@ -138,7 +143,13 @@ def test_fundamental_solvers_recover_ground_truth():
     def ac_lsq(s):
         return best(affcorr.fundamental_ac_lsq(s.multi_plane_acs(10)), s.F)
 
-    for seed, fn in enumerate([seven_pt, eight_pt, three_ac, ac_lsq], start=10):
+    def hybrid(s):
+        c = s.multi_plane_acs(5)
+        models = affcorr.fundamental_1ac4pt(c[:1], c[1:, :2], c[1:, 2:4])
+        assert 1 <= len(models) <= 3
+        return best(models, s.F)
+
+    for seed, fn in enumerate([seven_pt, eight_pt, three_ac, ac_lsq, hybrid], start=10):
         assert success_rate(seed, fn) >= 0.99, fn.__name__
 
 
@@ -151,6 +162,9 @@ def test_degenerate_samples_give_no_model():
     assert affcorr.fundamental_7pt(c[:7, :2], c[:7, 2:4]) == []
     assert affcorr.fundamental_8pt(c[:, :2], c[:, 2:4]) == []
     assert affcorr.fundamental_3ac(c[:3]) == []
+    assert affcorr.fundamental_1ac4pt(c[:1], c[1:5, :2], c[1:5, 2:4]) == []
+    # A point repeating the AC's centre.
+    assert affcorr.homography_1ac2pt(c[:1], c[[0, 1], :2], c[[0, 1], 2:4]) == []
     # Three collinear points.
     x1 = c[:4, :2].copy()
     x1[2] = (x1[0] + x1[1]) / 2
@@ -194,6 +208,14 @@ def test_bad_inputs_raise_value_error_naming_the_argument():
         affcorr.fundamental_3ac(np.zeros((2, 8)))
     with pytest.raises(ValueError, match="corrs"):
         affcorr.fundamental_ac_lsq(np.zeros((2, 8)))
+    with pytest.raises(ValueError, match="corr"):
+        affcorr.homography_1ac2pt(np.zeros((2, 8)), np.zeros((2, 2)), np.zeros((2, 2)))
+    with pytest.raises(ValueError, match="x2"):
+        affcorr.homography_1ac2pt(np.zeros((1, 8)), np.zeros((2, 2)), np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="x1"):
+        affcorr.fundamental_1ac4pt(np.zeros((1, 8)), np.zeros((3, 2)), np.zeros((4, 2)))
+    with pytest.raises(ValueError, match="corr"):
+        affcorr.fundamental_1ac4pt(np.full((1, 8), np.nan), np.zeros((4, 2)), np.zeros((4, 2)))
     with pytest.raises(ValueError, match="x1"):
         affcorr.homography_4pt([["a", "b"]] * 4, x)
     # NaN / infinity.

@@ -306,6 +306,9 @@ def affcorr_candidates(problem: str) -> dict[str, tuple[str, dict]]:
             "ac",
             dict(scoring="msac", affine_weight=50.0, affine_refinement="off"),
         ),
+        # Hybrid minimal samples (one AC and points), with the defaults and without affine terms.
+        "ac-hybrid": ("ac", dict(sample="hybrid")),
+        "ac-hybrid-msac": ("ac", dict(scoring="msac", sample="hybrid", **off)),
         "pts-auto": ("pts", {}),
         "pts-msac": ("pts", dict(scoring="msac")),
         "pts-magsac": ("pts", dict(scoring="magsac")),
@@ -670,6 +673,7 @@ def main(argv: list[str] | None = None) -> int:
 #: The candidates of the real pairs (names as in affcorr_candidates).
 REAL = (
     "ac-auto",
+    "ac-hybrid",
     "pts-auto",
     "ac-msac",
     "pts-msac",

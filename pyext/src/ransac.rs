@@ -115,6 +115,7 @@ const AFFINE_REFINEMENTS: &[(&str, AffineRefinement)] = &[
 const SAMPLES: &[(&str, SampleKind)] = &[
     ("affine", SampleKind::Affine),
     ("points", SampleKind::Points),
+    ("hybrid", SampleKind::Hybrid),
 ];
 const SAMPLERS: &[(&str, SamplerKind)] = &[
     ("uniform", SamplerKind::Uniform),

@@ -119,6 +119,11 @@ def homography_1ac_given_f(corrs: ArrayLike, F: ArrayLike) -> list[NDArray[np.fl
     """H from 1 AC (1, 8) and the fundamental matrix F (3, 3): H = -[e2]x F + e2 v^T with v from
     6 linear equations (Barath & Hajder 2017). [] if F has rank < 2."""
 
+def homography_1ac2pt(corr: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
+    """H from one AC corr (1, 8) and 2 point correspondences x1, x2 (2, 2), the hybrid sample:
+    10 linear equations of rank 8 (one AC fixes H up to 2 parameters, each point one more),
+    least squares. [] if a point repeats the AC's or the other."""
+
 def homography_lsq(x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
     """Non-minimal normalised DLT on N >= 4 point correspondences x1, x2 (N, 2) (least squares)."""
 
@@ -138,6 +143,11 @@ def fundamental_3ac(corrs: ArrayLike) -> list[NDArray[np.float64]]:
     """F from 3 ACs (3, 8): 1 epipolar + 2 affine epipolar equations each (9 x 9, rank 8
     generically), least-squares null vector, rank 2 enforced. One model generically (up to 3
     from the cubic if the null space is 2-dim); [] if all 3 ACs come from one plane."""
+
+def fundamental_1ac4pt(corr: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
+    """F from one AC corr (1, 8) and 4 point correspondences x1, x2 (4, 2), the hybrid sample:
+    the AC's 3 equations and the points' 4, solved as 7 points (2-dim null space + cubic).
+    Up to 3 candidates, each of rank 2."""
 
 def fundamental_ac_lsq(corrs: ArrayLike) -> list[NDArray[np.float64]]:
     """Non-minimal F from N >= 3 ACs (N, 8): the fundamental_3ac system over all ACs, least
@@ -217,6 +227,12 @@ def essential_5pt(x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
     x1, x2 (5, 2) in normalised coordinates (x = K^-1 p; use ``normalize_correspondences``).
     Returns up to 10 matrices (3, 3) with unit Frobenius norm (sign arbitrary) and
     x2^T E x1 = 0; an empty list for a degenerate sample (e.g. repeated points)."""
+
+def essential_1ac2pt(corr: ArrayLike, x1: ArrayLike, x2: ArrayLike) -> list[NDArray[np.float64]]:
+    """Essential matrices from one affine correspondence corr (1, 8) and two point
+    correspondences x1, x2 (2, 2), all normalised (``normalize_correspondences``): the hybrid
+    sample. Five linear equations (the AC's 3, one per point), then the five-point machinery.
+    Returns up to 10 unit-norm (3, 3) matrices."""
 
 def essential_2ac(corrs: ArrayLike) -> list[NDArray[np.float64]]:
     """Essential matrices from two affine correspondences (Barath & Hajder 2018).

@@ -5,7 +5,8 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
 
 - ``corrs`` is ``(N, 8)`` ACs ``[x1, y1, x2, y2, a11, a12, a21, a22]`` (``A = dx2/dx1``) or
   ``(N, 4)`` points ``[x1, y1, x2, y2]``, in pixels. ACs are sampled 2 at a time for H and E
-  and 3 at a time for F; points 4, 7 and 5 at a time.
+  and 3 at a time for F; points 4, 7 and 5 at a time; hybrid samples (``sample="hybrid"``)
+  take one AC and 2, 4 and 2 points.
 - ``threshold`` is the inlier threshold in pixels: on the transfer error for homographies and on
   the Sampson distance for fundamental matrices and relative poses. About 3 sigma of the keypoint
   noise is a good value.
@@ -14,8 +15,11 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
   ====================== ============ =========================================================
   option                 default      meaning
   ====================== ============ =========================================================
-  ``sample``             ``None``     ``"affine"`` (minimal samples of ACs) or ``"points"``;
-                                      ``None``: ACs for ``(N, 8)`` data, points for ``(N, 4)``
+  ``sample``             ``None``     ``"affine"`` (minimal samples of ACs), ``"points"`` or
+                                      ``"hybrid"`` (one AC and points: fewer affine
+                                      equations than ACs, fewer data than points; ``(N, 8)``
+                                      only); ``None``: ACs for ``(N, 8)`` data, points for
+                                      ``(N, 4)``
   ``sampler``            ``"uniform"`` ``"uniform"`` or ``"prosac"`` (needs ``quality``)
   ``quality``            ``None``     ``(N,)`` per-correspondence quality for PROSAC, higher is
                                       better (e.g. matcher certainty); in the batch forms a

@@ -10,14 +10,17 @@ solver                                        sample           max   method
 ============================================  ===============  ====  =============================
 ``homography_4pt(x1, x2)``                    4 points         1     normalised DLT
 ``homography_2ac(corrs)``                     2 ACs            1     6 equations per AC, LSQ
+``homography_1ac2pt(corr, x1, x2)``            1 AC + 2 points  1     10 equations of rank 8, LSQ
 ``homography_1ac_given_f(corrs, F)``          1 AC + F         1     H = -[e2]x F + e2 v^T
 ``homography_lsq`` / ``homography_ac_lsq``    N>=4 / N>=2      1     least squares
 ``fundamental_7pt(x1, x2)``                   7 points         3     det F = 0 cubic
 ``fundamental_8pt(x1, x2)``                   N >= 8 points    1     normalised 8-point, rank 2
 ``fundamental_3ac(corrs)``                    3 ACs            3     9 equations + rank 2
+``fundamental_1ac4pt(corr, x1, x2)``           1 AC + 4 points  3     7 equations, as 7 points
 ``fundamental_ac_lsq(corrs)``                 N >= 3 ACs       1     least squares + rank 2
 ``essential_5pt(x1, x2)``                     5 points         10    Nister / Stewenius, Sturm
 ``essential_2ac(corrs)``                      2 ACs            10    Barath & Hajder 2018
+``essential_1ac2pt(corr, x1, x2)``             1 AC + 2 points  10    5 equations, 5-point machinery
 ``essential_8pt`` / ``essential_lsq``         N >= 8 rows      1     LSQ, essential projection
 ============================================  ===============  ====  =============================
 
@@ -34,14 +37,17 @@ True
 
 from ._docs import document as _document
 from ._native import (
+    essential_1ac2pt,
     essential_2ac,
     essential_5pt,
     essential_8pt,
     essential_lsq,
+    fundamental_1ac4pt,
     fundamental_3ac,
     fundamental_7pt,
     fundamental_8pt,
     fundamental_ac_lsq,
+    homography_1ac2pt,
     homography_1ac_given_f,
     homography_2ac,
     homography_4pt,
@@ -50,14 +56,17 @@ from ._native import (
 )
 
 __all__ = [
+    "essential_1ac2pt",
     "essential_2ac",
     "essential_5pt",
     "essential_8pt",
     "essential_lsq",
+    "fundamental_1ac4pt",
     "fundamental_3ac",
     "fundamental_7pt",
     "fundamental_8pt",
     "fundamental_ac_lsq",
+    "homography_1ac2pt",
     "homography_1ac_given_f",
     "homography_2ac",
     "homography_4pt",

@@ -45,6 +45,7 @@ fn main() {
     let problem = args.get(1).map_or("fundamental", String::as_str);
     let sample = match args.get(2).map_or("affine", String::as_str) {
         "points" => SampleKind::Points,
+        "hybrid" => SampleKind::Hybrid,
         _ => SampleKind::Affine,
     };
     let scenes: u64 = args.get(3).and_then(|r| r.parse().ok()).unwrap_or(20);

@@ -67,7 +67,7 @@ fn homography_at_50_percent_outliers_points_and_acs() {
     for trial in 0..5 {
         let scene = PlaneScene::random(&mut rng);
         let d = make_data(&mut rng, &scene, 1, 1000, 0.5, 0.5, 0.02);
-        for kind in [SampleKind::Points, SampleKind::Affine] {
+        for kind in [SampleKind::Points, SampleKind::Affine, SampleKind::Hybrid] {
             let est = estimate_homography(&d.data, &options(2.0, kind, trial)).unwrap();
             let err = transfer_error(&est.model, &scene.homography(), 80);
             assert!(err < 1.0, "{kind:?}: transfer error {err}");
@@ -97,6 +97,30 @@ fn ac_sampling_needs_far_fewer_iterations() {
                 .iterations;
     }
     assert!(it_acs * 3 < it_pts, "AC {it_acs} vs points {it_pts}");
+}
+
+#[test]
+fn hybrid_sampling_needs_fewer_iterations_than_points() {
+    // One AC and two points (3 data) instead of 5 points: at 50% outliers the bound drops from
+    // ~290 to ~70 iterations; ask for half.
+    let mut rng = Pcg64::seed_from_u64(15);
+    let (mut it_pts, mut it_hybrid) = (0, 0);
+    for seed in 0..5 {
+        let scene = PlaneScene::random(&mut rng);
+        let d = make_data(&mut rng, &scene, 3, 2000, 0.5, 0.5, 0.02);
+        let (k1, k2) = (scene.k1, scene.k2);
+        let run = |kind| {
+            estimate_relative_pose(&d.data, &k1, &k2, &options(1.5, kind, seed))
+                .unwrap()
+                .iterations
+        };
+        it_pts += run(SampleKind::Points);
+        it_hybrid += run(SampleKind::Hybrid);
+    }
+    assert!(
+        it_hybrid * 2 < it_pts,
+        "hybrid {it_hybrid} vs points {it_pts}"
+    );
 }
 
 #[test]
@@ -142,7 +166,7 @@ fn relative_pose_at_50_percent_outliers_points_and_acs() {
     for trial in 0..5 {
         let scene = PlaneScene::random(&mut rng);
         let d = make_data(&mut rng, &scene, 3, 1000, 0.5, 0.5, 0.02);
-        for kind in [SampleKind::Points, SampleKind::Affine] {
+        for kind in [SampleKind::Points, SampleKind::Affine, SampleKind::Hybrid] {
             let est =
                 estimate_relative_pose(&d.data, &scene.k1, &scene.k2, &options(1.5, kind, trial))
                     .unwrap();
@@ -169,7 +193,7 @@ fn fundamental_at_50_percent_outliers_points_and_acs() {
         let scene = PlaneScene::random(&mut rng);
         let d = make_data(&mut rng, &scene, 5, 1000, 0.5, 0.5, 0.02);
         let truth = scene.fundamental();
-        for kind in [SampleKind::Points, SampleKind::Affine] {
+        for kind in [SampleKind::Points, SampleKind::Affine, SampleKind::Hybrid] {
             let est = estimate_fundamental(&d.data, &options(1.5, kind, trial)).unwrap();
             // The true inliers' Sampson error under the estimate is at the noise level.
             let rows: Vec<usize> = (0..d.data.len()).filter(|&i| d.is_inlier[i]).collect();
@@ -229,6 +253,13 @@ fn prosac_and_batch_and_errors() {
     assert!(estimate_homography(&d.data, &opts).is_err());
     let points = Correspondences::from_point_rows(&[[0.0; 4]; 10]).unwrap();
     assert!(estimate_homography(&points, &options(1.0, SampleKind::Affine, 0)).is_err());
+    for kind in [SampleKind::Affine, SampleKind::Hybrid] {
+        let err = estimate_fundamental(&points, &options(1.0, kind, 0)).unwrap_err();
+        assert!(
+            matches!(err, RansacError::InvalidOption { name: "sample", .. }),
+            "{err}"
+        );
+    }
     assert!(Correspondences::from_ac_rows(&[[f64::NAN; 8]]).is_err());
 }
 

@@ -4,6 +4,7 @@
 //! |---|---|---|---|
 //! | [`essential_5pt`] | 5 points | [`ESSENTIAL_5PT_MAX_SOLUTIONS`] = 10 | Nistér 2004; Stewénius et al. 2006 |
 //! | [`essential_2ac`] | 2 ACs | [`ESSENTIAL_2AC_MAX_SOLUTIONS`] = 10 | Barath & Hajder 2018 (5 best rows + 5-point machinery, ranked by the 6th) |
+//! | [`essential_1ac2pt`] | 1 AC + 2 points | [`ESSENTIAL_1AC2PT_MAX_SOLUTIONS`] = 10 | 5 linear rows + 5-point machinery |
 //! | [`essential_8pt`] | N ≥ 8 points | 1 | Longuet-Higgins 1981; Hartley 1997 |
 //! | [`essential_lsq`] | points + ACs, ≥ 8 rows | 1 | least squares, projected to the essential manifold |
 //!
@@ -15,15 +16,18 @@
 //! The minimal solvers allocate nothing.
 //!
 //! - `constraints`: the linear rows (point and affine), null spaces, and the ten cubic
-//!   essential constraints over a linear family, shared by the 5-point and 2AC solvers.
+//!   essential constraints over a linear family, shared by the 5-point, 2AC and 1AC + 2-point
+//!   solvers.
 //!
 //! Poses (R, t) from these matrices: [`crate::relpose`].
 
 mod constraints;
+mod essential_1ac2pt;
 mod essential_2ac;
 mod essential_5pt;
 mod essential_8pt;
 
+pub use essential_1ac2pt::{ESSENTIAL_1AC2PT_MAX_SOLUTIONS, essential_1ac2pt};
 pub use essential_2ac::{ESSENTIAL_2AC_MAX_SOLUTIONS, essential_2ac};
 pub use essential_5pt::{ESSENTIAL_5PT_MAX_SOLUTIONS, essential_5pt};
 pub use essential_8pt::{

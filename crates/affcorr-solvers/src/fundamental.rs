@@ -6,6 +6,7 @@
 //! | [`fundamental_8pt`] | N ≥ 8 points | ≤ 1 | normalised 8-point, rank 2 enforced |
 //! | [`fundamental_8pt_normal_equations`] | N ≥ 8 points, weighted | ≤ 1 | the same from the normal equations, cheaper (local optimisation's fit) |
 //! | [`fundamental_3ac`] | 3 ACs | ≤ 3 (1 generically) | 9 linear equations + rank 2 |
+//! | [`fundamental_1ac4pt`] | 1 AC + 4 points | ≤ 3 | 7 linear equations, as 7 points |
 //! | [`fundamental_ac_lsq`] | N ≥ 3 ACs | ≤ 1 | the 3AC system over N ACs, least squares |
 //!
 //! All solvers take pixels, apply Hartley's isotropic normalisation internally
@@ -32,7 +33,9 @@ use crate::linalg::{
     Gram9, Lsq9, NullSpace, Vec9, cofactor, gauss_jordan, mat3_from_vec9, null_vector,
     smallest_singular3, unit_frobenius,
 };
-use crate::normalization::{AFFINE_ROW_RADIUS_PX, Similarity, valid_indexed_input};
+use crate::normalization::{
+    AFFINE_ROW_RADIUS_PX, Similarity, hybrid_normalisers, valid_ac, valid_indexed_input,
+};
 use crate::poly::real_roots;
 use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2};
 
@@ -43,6 +46,8 @@ pub const FUNDAMENTAL_8PT_MAX_SOLUTIONS: usize = 1;
 /// Most models [`fundamental_3ac`] returns (3 only in the non-generic case of a 2-dim null
 /// space; generically 1).
 pub const FUNDAMENTAL_3AC_MAX_SOLUTIONS: usize = 3;
+/// Most models [`fundamental_1ac4pt`] returns.
+pub const FUNDAMENTAL_1AC4PT_MAX_SOLUTIONS: usize = 3;
 /// Most models [`fundamental_ac_lsq`] returns.
 pub const FUNDAMENTAL_AC_LSQ_MAX_SOLUTIONS: usize = 1;
 
@@ -81,6 +86,49 @@ pub fn fundamental_7pt(x1: &[Vec2], x2: &[Vec2], out: &mut [Mat3]) -> usize {
     let mut n = cubic_solutions(&f1, &f2, &t1, &t2, out);
     n = dedup(out, n);
     n
+}
+
+/// The fundamental matrices of one AC and 4 point correspondences: the hybrid minimal sample.
+///
+/// The AC gives its epipolar row and the two affine epipolar rows of the module doc, each point
+/// one epipolar row: 7 rows for F's 7 degrees of freedom, solved as [`fundamental_7pt`] solves
+/// its 7 (a 2-dim null space, then the cubic det(F₁ + xF₂) = 0; up to 3 models). The affine
+/// rows are weighted as in the AC systems (ρ·s₁); in an exactly determined system that changes
+/// nothing but the conditioning. Unlike 3 ACs, the sample does not break on ACs of one plane
+/// unless the points lie on it too: three of its five correspondences are plain points.
+///
+/// Returns 0 for `x1`/`x2` not holding 4 points, non-finite values, det A ≤ 0, or a system of
+/// rank below 7 (coincident points, all five on one plane, …).
+pub fn fundamental_1ac4pt(
+    ac: &AffineCorrespondence,
+    x1: &[Vec2],
+    x2: &[Vec2],
+    out: &mut [Mat3],
+) -> usize {
+    assert!(
+        out.len() >= FUNDAMENTAL_1AC4PT_MAX_SOLUTIONS,
+        "out too short"
+    );
+    let Some((t1, t2)) = hybrid_normalisers(ac, x1, x2, 4) else {
+        return 0;
+    };
+    let (p, q) = (t1.apply(&ac.x1), t2.apply(&ac.x2));
+    let w = AFFINE_ROW_RADIUS_PX * t1.s;
+    let [a1, a2] = affine_rows(&p, &q, &(ac.a * (t2.s / t1.s)));
+    let mut m = [[0.0; 9]; 7];
+    m[0] = epipolar_row(&p, &q);
+    m[1] = a1.map(|v| v * w);
+    m[2] = a2.map(|v| v * w);
+    for (row, (a, b)) in m[3..].iter_mut().zip(x1.iter().zip(x2)) {
+        *row = epipolar_row(&t1.apply(a), &t2.apply(b));
+    }
+    let Some(perm) = gauss_jordan(&mut m, RANK_TOL) else {
+        return 0;
+    };
+    let f1 = mat3_from_vec9(&null_vector(&m, &perm, 7));
+    let f2 = mat3_from_vec9(&null_vector(&m, &perm, 8));
+    let n = cubic_solutions(&f1, &f2, &t1, &t2, out);
+    dedup(out, n)
 }
 
 /// The normalised 8-point algorithm on N ≥ 8 point correspondences (Hartley, "In defense of the
@@ -248,12 +296,7 @@ fn affine_rows(p: &Vec2, q: &Vec2, a: &Mat2) -> [[f64; 9]; 2] {
 
 /// The 3N×9 AC system in normalised coordinates, folded into its 9×9 factor, and its null space.
 fn ac_system(acs: &[AffineCorrespondence]) -> Option<(NullSpace, Similarity, Similarity)> {
-    let valid = |ac: &AffineCorrespondence| {
-        ac.x1.iter().chain(ac.x2.iter()).all(|v| v.is_finite())
-            && ac.a.iter().all(|v| v.is_finite())
-            && ac.a.determinant() > 0.0
-    };
-    if !acs.iter().all(valid) {
+    if !acs.iter().all(valid_ac) {
         return None;
     }
     let (t1, t2) = normalisers(acs.iter().map(|ac| ac.x1), acs.iter().map(|ac| ac.x2))?;

@@ -4,6 +4,7 @@
 //! |---|---|---|---|
 //! | [`homography_4pt`] | 4 points | ≤ 1 | normalised DLT, null space in closed form |
 //! | [`homography_2ac`] | 2 ACs | ≤ 1 | 12 linear equations (2 point + 4 affine per AC), LSQ |
+//! | [`homography_1ac2pt`] | 1 AC + 2 points | ≤ 1 | 10 linear equations (2 + 4 + 4) of rank 8, LSQ |
 //! | [`homography_1ac_given_f`] | 1 AC + F | ≤ 1 | H = −\[e₂\]×F + e₂vᵀ, 6 linear equations in v |
 //! | [`homography_lsq`] | N ≥ 4 points | ≤ 1 | normalised DLT, least squares |
 //! | [`homography_lsq_normal_equations`] | N ≥ 4 points, weighted | ≤ 1 | the same from the normal equations, cheaper (local optimisation's fit) |
@@ -31,13 +32,17 @@
 //! estimates improve about 3× against unweighted rows.
 
 use crate::linalg::{Lsq9, householder_fold, mat3_from_vec9, smallest_singular3, unit_frobenius};
-use crate::normalization::{AFFINE_ROW_RADIUS_PX, Similarity, valid_indexed_input};
+use crate::normalization::{
+    AFFINE_ROW_RADIUS_PX, Similarity, hybrid_normalisers, valid_ac, valid_indexed_input,
+};
 use affcorr_geom::{AffineCorrespondence, Mat3, Vec2, Vec3};
 
 /// Most models [`homography_4pt`] returns.
 pub const HOMOGRAPHY_4PT_MAX_SOLUTIONS: usize = 1;
 /// Most models [`homography_2ac`] returns.
 pub const HOMOGRAPHY_2AC_MAX_SOLUTIONS: usize = 1;
+/// Most models [`homography_1ac2pt`] returns.
+pub const HOMOGRAPHY_1AC2PT_MAX_SOLUTIONS: usize = 1;
 /// Most models [`homography_1ac_given_f`] returns.
 pub const HOMOGRAPHY_1AC_GIVEN_F_MAX_SOLUTIONS: usize = 1;
 /// Most models [`homography_lsq`] returns.
@@ -159,6 +164,48 @@ pub fn homography_2ac(acs: &[AffineCorrespondence], out: &mut [Mat3]) -> usize {
         return 0;
     }
     ac_least_squares(acs, out)
+}
+
+/// The homography of one AC and two point correspondences `x1[k] ↔ x2[k]`: the hybrid
+/// sample. One AC fixes H up to a 2-parameter family: with the AC's points at the origins,
+/// H = \[\[A, 0\], \[vᵀ, 1\]\] for any v (H(x) = A x / (1 + vᵀx) has the value 0 and the
+/// Jacobian A there). A further point x ↦ q fixes only 1 + vᵀx = ‖A x‖/‖q‖, one equation in v
+/// (its other equation, q ∥ A x, constrains the data, not H), so one AC and one point leave
+/// a 1-parameter family and two points are needed. The AC's 2 point and 4 affine rows and the
+/// points' 4 rows (module doc) are 10 equations of rank 8, solved in the least-squares sense
+/// (normalised coordinates, affine rows weighted as in the AC systems). Four affine rows
+/// instead of the 2-AC sample's eight: less of H rests on the affine maps' error.
+///
+/// Returns 0 for `x1`/`x2` not holding 2 points, non-finite values, det A ≤ 0, a point
+/// coinciding with the AC's, or a system whose null space is not one-dimensional.
+pub fn homography_1ac2pt(
+    ac: &AffineCorrespondence,
+    x1: &[Vec2],
+    x2: &[Vec2],
+    out: &mut [Mat3],
+) -> usize {
+    assert!(
+        out.len() >= HOMOGRAPHY_1AC2PT_MAX_SOLUTIONS,
+        "out too short"
+    );
+    let Some((t1, t2)) = hybrid_normalisers(ac, x1, x2, 2) else {
+        return 0;
+    };
+    let (p, q) = (t1.apply(&ac.x1), t2.apply(&ac.x2));
+    let w = AFFINE_ROW_RADIUS_PX * t1.s;
+    let mut lsq = Lsq9::new();
+    for r in point_rows(&p, &q) {
+        lsq.add_row(r);
+    }
+    for r in affine_rows(&p, &q, &(ac.a * (t2.s / t1.s))) {
+        lsq.add_row(r.map(|v| v * w));
+    }
+    for (a, b) in x1.iter().zip(x2) {
+        for r in point_rows(&t1.apply(a), &t2.apply(b)) {
+            lsq.add_row(r);
+        }
+    }
+    solve_lsq(&lsq, &t1, &t2, out)
 }
 
 /// The non-minimal homography of N ≥ 2 ACs: the system of [`homography_2ac`] over all ACs,
@@ -332,14 +379,6 @@ pub fn homography_1ac_given_f(acs: &[AffineCorrespondence], f: &Mat3, out: &mut 
     }
     let h_norm = base + e2 * v.transpose();
     finish(&h_norm, &t1, &t2, out)
-}
-
-/// det A > 0 and everything finite.
-#[inline]
-fn valid_ac(ac: &AffineCorrespondence) -> bool {
-    ac.x1.iter().chain(ac.x2.iter()).all(|v| v.is_finite())
-        && ac.a.iter().all(|v| v.is_finite())
-        && ac.a.determinant() > 0.0
 }
 
 /// The two DLT rows of a normalised point pair.

@@ -10,7 +10,7 @@
 //!   In the normalised frames H = T₂⁻¹ Ĥ T₁ and F = T₂ᵀ F̂ T₁.
 //! - [`AFFINE_ROW_RADIUS_PX`]: the radius ρ that scales the affine rows of the AC systems by ρ·s₁.
 
-use affcorr_geom::{Mat3, Vec2};
+use affcorr_geom::{AffineCorrespondence, Mat3, Vec2};
 
 /// Radius ρ (pixels of image 1) that scales every affine row in the AC systems by ρ·s₁.
 ///
@@ -35,6 +35,32 @@ pub(crate) fn valid_indexed_input(
         && indices.len() >= min
         && indices.iter().all(|&i| i < n1)
         && weights.is_none_or(|w| w.len() == indices.len() && w.iter().all(|v| *v >= 0.0))
+}
+
+/// det A > 0 and everything finite: an AC the AC systems can use.
+#[inline]
+pub(crate) fn valid_ac(ac: &AffineCorrespondence) -> bool {
+    ac.x1.iter().chain(ac.x2.iter()).all(|v| v.is_finite())
+        && ac.a.iter().all(|v| v.is_finite())
+        && ac.a.determinant() > 0.0
+}
+
+/// The Hartley normalisations of a hybrid sample (one AC and `points` point correspondences),
+/// over the AC's centre and the points together; `None` when `x1`/`x2` do not hold `points`
+/// points, the AC is not [`valid_ac`], or a normalisation fails (non-finite or coincident
+/// points).
+pub(crate) fn hybrid_normalisers(
+    ac: &AffineCorrespondence,
+    x1: &[Vec2],
+    x2: &[Vec2],
+    points: usize,
+) -> Option<(Similarity, Similarity)> {
+    if x1.len() != points || x2.len() != points || !valid_ac(ac) {
+        return None;
+    }
+    let t1 = Similarity::from_points(std::iter::once(ac.x1).chain(x1.iter().copied()))?;
+    let t2 = Similarity::from_points(std::iter::once(ac.x2).chain(x2.iter().copied()))?;
+    Some((t1, t2))
 }
 
 /// x̂ = s·(x − c).

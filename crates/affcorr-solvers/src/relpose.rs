@@ -11,11 +11,12 @@
 //! |---|---|---|
 //! | [`relative_pose_5pt`] | [`essential_5pt`] | [`RELPOSE_5PT_MAX_SOLUTIONS`] |
 //! | [`relative_pose_2ac`] | [`essential_2ac`] | [`RELPOSE_2AC_MAX_SOLUTIONS`] |
+//! | [`relative_pose_1ac2pt`] | [`essential_1ac2pt`] | [`RELPOSE_1AC2PT_MAX_SOLUTIONS`] |
 //! | [`relative_pose_8pt`] | [`essential_8pt`] | 1 |
 
 use crate::essential::{
-    ESSENTIAL_2AC_MAX_SOLUTIONS, ESSENTIAL_5PT_MAX_SOLUTIONS, essential_2ac, essential_5pt,
-    essential_8pt,
+    ESSENTIAL_1AC2PT_MAX_SOLUTIONS, ESSENTIAL_2AC_MAX_SOLUTIONS, ESSENTIAL_5PT_MAX_SOLUTIONS,
+    essential_1ac2pt, essential_2ac, essential_5pt, essential_8pt,
 };
 use affcorr_geom::{AffineCorrespondence, Mat3, Vec2};
 
@@ -27,6 +28,8 @@ pub use affcorr_geom::epipolar::{
 pub const RELPOSE_5PT_MAX_SOLUTIONS: usize = ESSENTIAL_5PT_MAX_SOLUTIONS;
 /// Largest number of poses [`relative_pose_2ac`] writes.
 pub const RELPOSE_2AC_MAX_SOLUTIONS: usize = ESSENTIAL_2AC_MAX_SOLUTIONS;
+/// Largest number of poses [`relative_pose_1ac2pt`] writes.
+pub const RELPOSE_1AC2PT_MAX_SOLUTIONS: usize = ESSENTIAL_1AC2PT_MAX_SOLUTIONS;
 
 /// Keeps the poses of `es` whose best factorisation has at least `need` of the sample in front
 /// of both cameras.
@@ -68,6 +71,26 @@ pub fn relative_pose_2ac(acs: &[AffineCorrespondence], out: &mut [Pose]) -> usiz
     let x1 = [acs[0].x1, acs[1].x1];
     let x2 = [acs[0].x2, acs[1].x2];
     poses_in_front(&es[..n], &x1, &x2, 2, out)
+}
+
+/// Relative poses from one normalised AC and two normalised point correspondences:
+/// [`essential_1ac2pt`], then the factorisation of each E with the AC's centre and both points
+/// in front of both cameras. `out` must hold [`RELPOSE_1AC2PT_MAX_SOLUTIONS`]; returns the
+/// number written.
+pub fn relative_pose_1ac2pt(
+    ac: &AffineCorrespondence,
+    x1: &[Vec2],
+    x2: &[Vec2],
+    out: &mut [Pose],
+) -> usize {
+    if out.len() < RELPOSE_1AC2PT_MAX_SOLUTIONS || x1.len() != 2 || x2.len() != 2 {
+        return 0;
+    }
+    let mut es = [Mat3::zeros(); ESSENTIAL_1AC2PT_MAX_SOLUTIONS];
+    let n = essential_1ac2pt(ac, x1, x2, &mut es);
+    let p1 = [ac.x1, x1[0], x1[1]];
+    let p2 = [ac.x2, x2[0], x2[1]];
+    poses_in_front(&es[..n], &p1, &p2, 3, out)
 }
 
 /// The relative pose from N ≥ 8 normalised point correspondences: [`essential_8pt`], then the

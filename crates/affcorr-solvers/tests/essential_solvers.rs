@@ -157,6 +157,51 @@ fn two_ac_recovers_e_from_two_planes() {
 }
 
 #[test]
+fn one_ac_and_two_points_recover_e_on_one_plane() {
+    let mut rng = Pcg64::seed_from_u64(41);
+    let mut out = [Mat3::zeros(); ESSENTIAL_1AC2PT_MAX_SOLUTIONS];
+    let errors: Vec<f64> = (0..TRIALS)
+        .map(|_| {
+            let (scene, acs) = plane_acs(&mut rng, 3);
+            let (x1, x2) = ([acs[1].x1, acs[2].x1], [acs[1].x2, acs[2].x2]);
+            let n = essential_1ac2pt(&acs[0], &x1, &x2, &mut out);
+            best_error(&out[..n], &scene.essential())
+        })
+        .collect();
+    assert_rate("1ac2pt plane", &errors);
+}
+
+/// The AC on the plane, the two points anywhere in the scene: every returned E satisfies the
+/// five linear rows (the AC's three and the points'), and the truth is among them.
+#[test]
+fn one_ac_and_two_points_recover_e_on_general_points() {
+    let mut rng = Pcg64::seed_from_u64(42);
+    let mut out = [Mat3::zeros(); ESSENTIAL_1AC2PT_MAX_SOLUTIONS];
+    let errors: Vec<f64> = (0..TRIALS)
+        .map(|_| {
+            let (scene, acs) = plane_acs(&mut rng, 1);
+            let (x1, x2) = general_points(&mut rng, &scene.pose, 2);
+            let n = essential_1ac2pt(&acs[0], &x1, &x2, &mut out);
+            for e in &out[..n] {
+                let ac = &acs[0];
+                let (p1, p2) = (ac.x1.push(1.0), ac.x2.push(1.0));
+                let (ep1, etp2) = (e * p1, e.transpose() * p2);
+                for k in 0..2 {
+                    let affine = ac.a[(0, k)] * ep1.x + ac.a[(1, k)] * ep1.y + etp2[k];
+                    assert!(affine.abs() < 1e-6, "{affine}");
+                }
+                for (p, q) in x1.iter().chain([&ac.x1]).zip(x2.iter().chain([&ac.x2])) {
+                    let r = q.push(1.0).dot(&(e * p.push(1.0)));
+                    assert!(r.abs() < 1e-6, "{r}");
+                }
+            }
+            best_error(&out[..n], &scene.essential())
+        })
+        .collect();
+    assert_rate("1ac2pt general", &errors);
+}
+
+#[test]
 fn eight_point_recovers_e_on_general_points() {
     let mut rng = Pcg64::seed_from_u64(14);
     let mut out = [Mat3::zeros(); 1];
@@ -279,6 +324,7 @@ fn relative_poses_recover_r_and_t() {
             .fold(f64::INFINITY, f64::min)
     };
     let (mut e5, mut e2, mut e8) = (Vec::new(), Vec::new(), Vec::new());
+    let mut e3 = Vec::new();
     for _ in 0..TRIALS {
         let (scene, acs) = plane_acs(&mut rng, 5);
         let x1: Vec<Vec2> = acs.iter().map(|a| a.x1).collect();
@@ -288,6 +334,8 @@ fn relative_poses_recover_r_and_t() {
         e5.push(pose_error(&out[..n], &scene.pose));
         let n = relative_pose_2ac(&acs[..2], &mut out);
         e2.push(pose_error(&out[..n], &scene.pose));
+        let n = relative_pose_1ac2pt(&acs[2], &x1[3..], &x2[3..], &mut out);
+        e3.push(pose_error(&out[..n], &scene.pose));
         let pose = random_pose(&mut rng);
         let (x1, x2) = general_points(&mut rng, &pose, 12);
         let n = relative_pose_8pt(&x1, &x2, &mut out);
@@ -298,6 +346,7 @@ fn relative_poses_recover_r_and_t() {
     // One-plane 2AC pairs, as in two_ac_recovers_e_on_one_plane (measured 98.7%).
     assert_rate_at_least("relpose 2ac", &e2, 0.985);
     assert_rate("relpose 8pt", &e8);
+    assert_rate("relpose 1ac2pt", &e3);
 }
 
 #[test]
@@ -338,6 +387,24 @@ fn degenerate_samples_give_no_model() {
     nan[1].a[(0, 1)] = f64::NAN;
     assert_eq!(essential_2ac(&nan, &mut out), 0);
     assert_eq!(essential_2ac(&acs[..1], &mut out), 0);
+
+    // 1AC + 2 points: det A ≤ 0, a point repeating the AC's centre, NaN, wrong count, short
+    // buffer.
+    let (p1, p2) = (&x1[1..3], &x2[1..3]);
+    assert!(essential_1ac2pt(&acs[0], p1, p2, &mut out) > 0);
+    let mut flipped = acs[0];
+    flipped.a = Mat2::new(1.0, 0.0, 0.0, -1.0);
+    assert_eq!(essential_1ac2pt(&flipped, p1, p2, &mut out), 0);
+    let (r1, r2) = ([x1[1], acs[0].x1], [x2[1], acs[0].x2]);
+    assert_eq!(essential_1ac2pt(&acs[0], &r1, &r2, &mut out), 0);
+    let mut nan = acs[0];
+    nan.a[(1, 0)] = f64::NAN;
+    assert_eq!(essential_1ac2pt(&nan, p1, p2, &mut out), 0);
+    let mut nan_pts = [x1[1], x1[2]];
+    nan_pts[1].y = f64::NAN;
+    assert_eq!(essential_1ac2pt(&acs[0], &nan_pts, p2, &mut out), 0);
+    assert_eq!(essential_1ac2pt(&acs[0], &x1[1..4], &x2[1..4], &mut out), 0);
+    assert_eq!(essential_1ac2pt(&acs[0], p1, p2, &mut out[..9]), 0);
     assert_eq!(essential_2ac(&acs[..3], &mut out), 0);
     assert_eq!(essential_2ac(&acs[..2], &mut out[..1]), 0);
 

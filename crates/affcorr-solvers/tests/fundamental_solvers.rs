@@ -72,6 +72,40 @@ fn seven_point_recovers_ground_truth() {
 }
 
 #[test]
+fn one_ac_and_four_points_recover_ground_truth() {
+    let (rate, models) = success_rate(31, 5, |acs, out| {
+        let (x1, x2) = points(&acs[1..]);
+        let n = fundamental_1ac4pt(&acs[0], &x1, &x2, out);
+        for f in &out[..n] {
+            assert!(f.determinant().abs() < 1e-10, "rank 2");
+        }
+        n
+    });
+    println!("fundamental_1ac4pt: {rate}, {models} models on average");
+}
+
+/// Unlike 3 ACs, the hybrid sample solves when the AC and the points share one plane with
+/// any two of them: here the AC and two points lie on one plane, the other two points elsewhere.
+#[test]
+fn one_ac_and_four_points_with_three_on_one_plane_recover_ground_truth() {
+    let mut rng = Pcg64::seed_from_u64(32);
+    let mut out = [Mat3::zeros(); FUNDAMENTAL_1AC4PT_MAX_SOLUTIONS];
+    let mut ok = 0;
+    for _ in 0..TRIALS {
+        let scene = PlaneScene::random(&mut rng);
+        let on_plane = scene.sample(&mut rng, 3);
+        let elsewhere = multi_plane_sample(&scene, &mut rng, 2);
+        let pts: Vec<_> = on_plane[1..].iter().chain(&elsewhere).copied().collect();
+        let (x1, x2) = points(&pts);
+        let n = fundamental_1ac4pt(&on_plane[0], &x1, &x2, &mut out);
+        if n > 0 && best_error(&out[..n], &scene.fundamental()) < TOL {
+            ok += 1;
+        }
+    }
+    assert!(ok as f64 >= 0.99 * TRIALS as f64, "{ok}/{TRIALS}");
+}
+
+#[test]
 fn eight_point_recovers_ground_truth() {
     for (seed, n) in [(12, 8), (13, 50)] {
         let (rate, _) = success_rate(seed, n, |acs, out| {
@@ -259,6 +293,16 @@ fn degenerate_samples_give_no_model() {
     assert!(fundamental_7pt(&x1[..7], &x2[..7], &mut out) > 0);
     assert_eq!(fundamental_8pt(&x1, &x2, &mut out), 1);
     assert_eq!(fundamental_3ac(&acs[..3], &mut out), 1);
+    let hybrid = |ac: &AffineCorrespondence, pts: &[AffineCorrespondence], out: &mut [Mat3]| {
+        let (p1, p2) = points(pts);
+        fundamental_1ac4pt(ac, &p1, &p2, out)
+    };
+    assert!(hybrid(&acs[0], &acs[1..5], &mut out) > 0);
+    // A point repeating the AC's centre: rank 6 < 7.
+    assert_eq!(
+        hybrid(&acs[0], &[acs[1], acs[2], acs[3], acs[0]], &mut out),
+        0
+    );
     // A repeated point: rank 6 < 7.
     let (mut r1, mut r2) = (x1.clone(), x2.clone());
     r1[6] = r1[0];
@@ -275,8 +319,10 @@ fn degenerate_samples_give_no_model() {
     bad[1].a = Mat2::new(1.0, 0.0, 0.0, -1.0);
     assert_eq!(fundamental_3ac(&bad[..3], &mut out), 0);
     assert_eq!(fundamental_ac_lsq(&bad, &mut out), 0);
+    assert_eq!(hybrid(&bad[1], &acs[2..6], &mut out), 0);
     bad[1].a = Mat2::zeros();
     assert_eq!(fundamental_3ac(&bad[..3], &mut out), 0);
+    assert_eq!(hybrid(&bad[1], &acs[2..6], &mut out), 0);
     // NaN / infinity anywhere.
     for k in 0..8 {
         let mut row = acs[2].to_row();
@@ -285,6 +331,10 @@ fn degenerate_samples_give_no_model() {
         bad[2] = AffineCorrespondence::from_row(&row);
         assert_eq!(fundamental_3ac(&bad[..3], &mut out), 0);
         assert_eq!(fundamental_ac_lsq(&bad, &mut out), 0);
+        assert_eq!(hybrid(&bad[2], &acs[3..7], &mut out), 0);
+        if k < 4 {
+            assert_eq!(hybrid(&acs[0], &bad[1..5], &mut out), 0);
+        }
         let (b1, b2) = points(&bad);
         if k < 4 {
             assert_eq!(fundamental_7pt(&b1[..7], &b2[..7], &mut out), 0);
@@ -299,6 +349,8 @@ fn degenerate_samples_give_no_model() {
     assert_eq!(fundamental_3ac(&acs[..2], &mut out), 0);
     assert_eq!(fundamental_3ac(&acs[..4], &mut out), 0);
     assert_eq!(fundamental_ac_lsq(&acs[..2], &mut out), 0);
+    assert_eq!(hybrid(&acs[0], &acs[1..4], &mut out), 0);
+    assert_eq!(hybrid(&acs[0], &acs[1..6], &mut out), 0);
 }
 
 /// Found by fuzzing (fuzz/, target `solvers`): a degenerate sample (repeated points) whose cubic

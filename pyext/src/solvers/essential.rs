@@ -4,7 +4,7 @@
 //! sample (repeated points, det A ≤ 0, rank-deficient system) gives an empty list. Bad shapes and
 //! NaN/infinity raise `ValueError` naming the argument.
 
-use super::inputs::{models, read_acs, read_points, same_length};
+use super::inputs::{models, read_acs, read_hybrid, read_points, same_length};
 use affcorr::geom::Mat3;
 use affcorr::solvers::essential as e;
 use numpy::PyArrayDyn;
@@ -13,6 +13,7 @@ use pyo3::prelude::*;
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(essential_5pt, m)?)?;
     m.add_function(wrap_pyfunction!(essential_2ac, m)?)?;
+    m.add_function(wrap_pyfunction!(essential_1ac2pt, m)?)?;
     m.add_function(wrap_pyfunction!(essential_8pt, m)?)?;
     m.add_function(wrap_pyfunction!(essential_lsq, m)?)?;
     Ok(())
@@ -78,5 +79,19 @@ fn essential_lsq<'py>(
     }
     let mut out = [Mat3::zeros(); e::ESSENTIAL_8PT_MAX_SOLUTIONS];
     let n = py.detach(|| e::essential_lsq(&x1, &x2, &acs, &mut out));
+    models(py, &out, n)
+}
+
+/// One AC `corr` (1, 8) and 2 points `x1`, `x2` (2, 2): the hybrid minimal sample.
+#[pyfunction]
+fn essential_1ac2pt<'py>(
+    py: Python<'py>,
+    corr: &Bound<'py, PyAny>,
+    x1: &Bound<'py, PyAny>,
+    x2: &Bound<'py, PyAny>,
+) -> PyResult<Models<'py>> {
+    let (ac, x1, x2) = read_hybrid(corr, x1, x2, 2)?;
+    let mut out = [Mat3::zeros(); e::ESSENTIAL_1AC2PT_MAX_SOLUTIONS];
+    let n = e::essential_1ac2pt(&ac, &x1, &x2, &mut out);
     models(py, &out, n)
 }

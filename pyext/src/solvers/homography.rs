@@ -2,7 +2,7 @@
 //! degenerate sample (collinear or coincident points, det A ≤ 0, rank-deficient system) gives an
 //! empty list. Bad shapes and NaN/infinity raise `ValueError` naming the argument.
 
-use super::inputs::{Models, models, read_acs, read_points, same_length};
+use super::inputs::{Models, models, read_acs, read_hybrid, read_points, same_length};
 use affcorr::geom::Mat3;
 use affcorr::solvers::homography as h;
 use pyo3::prelude::*;
@@ -10,6 +10,7 @@ use pyo3::prelude::*;
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(homography_4pt, m)?)?;
     m.add_function(wrap_pyfunction!(homography_2ac, m)?)?;
+    m.add_function(wrap_pyfunction!(homography_1ac2pt, m)?)?;
     m.add_function(wrap_pyfunction!(homography_1ac_given_f, m)?)?;
     m.add_function(wrap_pyfunction!(homography_lsq, m)?)?;
     m.add_function(wrap_pyfunction!(homography_ac_lsq, m)?)?;
@@ -71,5 +72,19 @@ fn homography_ac_lsq<'py>(py: Python<'py>, corrs: &Bound<'py, PyAny>) -> PyResul
     let acs = read_acs(corrs, "corrs", None, 2)?;
     let mut out = [Mat3::zeros(); h::HOMOGRAPHY_AC_LSQ_MAX_SOLUTIONS];
     let n = py.detach(|| h::homography_ac_lsq(&acs, &mut out));
+    models(py, &out, n)
+}
+
+/// One AC `corr` (1, 8) and 2 points `x1`, `x2` (2, 2): the hybrid minimal sample.
+#[pyfunction]
+fn homography_1ac2pt<'py>(
+    py: Python<'py>,
+    corr: &Bound<'py, PyAny>,
+    x1: &Bound<'py, PyAny>,
+    x2: &Bound<'py, PyAny>,
+) -> PyResult<Models<'py>> {
+    let (ac, x1, x2) = read_hybrid(corr, x1, x2, 2)?;
+    let mut out = [Mat3::zeros(); h::HOMOGRAPHY_1AC2PT_MAX_SOLUTIONS];
+    let n = h::homography_1ac2pt(&ac, &x1, &x2, &mut out);
     models(py, &out, n)
 }

@@ -64,6 +64,20 @@ pub(super) fn read_acs(
     Ok(acs)
 }
 
+/// A hybrid sample: one AC `corr` (1, 8) and `points` point correspondences `x1`, `x2`
+/// (`points`, 2), each finite.
+pub(super) fn read_hybrid(
+    corr: &Bound<'_, PyAny>,
+    x1: &Bound<'_, PyAny>,
+    x2: &Bound<'_, PyAny>,
+    points: usize,
+) -> PyResult<(AffineCorrespondence, Vec<Vec2>, Vec<Vec2>)> {
+    let ac = read_acs(corr, "corr", Some(1), 1)?[0];
+    let x1 = read_points(x1, "x1", Some(points), points)?;
+    let x2 = read_points(x2, "x2", Some(points), points)?;
+    Ok((ac, x1, x2))
+}
+
 /// x1 and x2 must have the same length.
 pub(super) fn same_length(x1: &[Vec2], x2: &[Vec2]) -> PyResult<()> {
     if x1.len() != x2.len() {

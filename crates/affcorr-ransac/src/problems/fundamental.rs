@@ -1,7 +1,7 @@
 //! Fundamental-matrix estimation, p2ᵀ F p1 = 0 in pixels.
 //!
-//! - Minimal samples: 7 points ([`fundamental_7pt`], ≤ 3 models) or 3 ACs
-//!   ([`fundamental_3ac`]).
+//! - Minimal samples: 7 points ([`fundamental_7pt`], ≤ 3 models), 3 ACs
+//!   ([`fundamental_3ac`]) or 1 AC and 4 points ([`fundamental_1ac4pt`], ≤ 3 models).
 //! - Non-minimal fit: the normalised 8-point algorithm on the inliers, from its normal equations
 //!   ([`fundamental_8pt_normal_equations`]), or AC least squares when fewer than 8.
 //! - Residual (px²): the point Sampson distance SD_P, plus, with `affine_weight` λ > 0,
@@ -9,7 +9,9 @@
 //!   AC's confidence c (1 without) and a cap (+∞ unless set).
 
 use super::simd::dispatch;
-use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, epipolar_lm};
+use super::{
+    Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, epipolar_lm, hybrid_support,
+};
 use crate::loss::Loss;
 use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Mat9, Vec9, levenberg_marquardt};
@@ -18,8 +20,8 @@ use affcorr_geom::homography::ac_from_homography;
 use affcorr_geom::sampson::{sampson_affine, sampson_point};
 use affcorr_geom::{AffineCorrespondence, Mat3, PointCorrespondence, Vec2, Vec3};
 use affcorr_solvers::fundamental::{
-    FUNDAMENTAL_3AC_MAX_SOLUTIONS, FUNDAMENTAL_7PT_MAX_SOLUTIONS, fundamental_3ac, fundamental_7pt,
-    fundamental_8pt_normal_equations, fundamental_ac_lsq,
+    FUNDAMENTAL_3AC_MAX_SOLUTIONS, FUNDAMENTAL_7PT_MAX_SOLUTIONS, fundamental_1ac4pt,
+    fundamental_3ac, fundamental_7pt, fundamental_8pt_normal_equations, fundamental_ac_lsq,
 };
 use affcorr_solvers::homography::homography_2ac;
 
@@ -148,24 +150,35 @@ fn epipolar_residual(data: &Correspondences, f: &Mat3, a: &AffineScore<'_>, i: u
     sampson_point(f, &points) + (w * (a0 + a1)).min(a.cap)
 }
 
-/// The data that can seed a good AC sample under `f` (`Problem::sample_support`); `None` for
-/// point samples.
+/// The data that can seed a good AC sample of `sample_size` under `f`
+/// (`Problem::sample_support`; for a hybrid sample the support of [`hybrid_support`]); `None`
+/// for point samples.
 pub(crate) fn epipolar_seeds(
     data: &Correspondences,
     f: &Mat3,
     kind: SampleKind,
+    sample_size: usize,
     threshold_sq: f64,
 ) -> Option<usize> {
-    let w = SEED_AFFINE_WEIGHT;
-    (kind == SampleKind::Affine).then(|| {
+    let below = |weight| {
+        let score = AffineScore {
+            weight,
+            ..AffineScore::NONE
+        };
         count_below(data.len(), threshold_sq, |i| {
-            let seed = AffineScore {
-                weight: w,
-                ..AffineScore::NONE
-            };
-            epipolar_residual(data, f, &seed, i)
+            epipolar_residual(data, f, &score, i)
         })
-    })
+    };
+    match kind {
+        SampleKind::Points => None,
+        SampleKind::Affine => Some(below(SEED_AFFINE_WEIGHT)),
+        SampleKind::Hybrid => Some(hybrid_support(
+            below(SEED_AFFINE_WEIGHT),
+            below(0.0),
+            data.len(),
+            sample_size,
+        )),
+    }
 }
 
 /// Squared Sampson residuals (point, plus weighted affine) of `data[start..]` under `f`.
@@ -232,13 +245,14 @@ impl Problem for FundamentalProblem<'_> {
     }
 
     fn sample_support(&self, f: &Mat3, threshold_sq: f64) -> Option<usize> {
-        epipolar_seeds(self.data, f, self.kind, threshold_sq)
+        epipolar_seeds(self.data, f, self.kind, self.sample_size(), threshold_sq)
     }
 
     fn sample_size(&self) -> usize {
         match self.kind {
             SampleKind::Points => 7,
             SampleKind::Affine => 3,
+            SampleKind::Hybrid => 5,
         }
     }
 
@@ -257,6 +271,11 @@ impl Problem for FundamentalProblem<'_> {
                     return;
                 }
                 fundamental_3ac(&acs, &mut f)
+            }
+            SampleKind::Hybrid => {
+                let x1: [Vec2; 4] = std::array::from_fn(|k| self.data.x1[sample[k + 1]]);
+                let x2: [Vec2; 4] = std::array::from_fn(|k| self.data.x2[sample[k + 1]]);
+                fundamental_1ac4pt(&self.data.ac(sample[0]), &x1, &x2, &mut f)
             }
         };
         out.extend_from_slice(&f[..n]);

@@ -1,6 +1,7 @@
 //! Homography estimation, p2 ~ H p1 in pixels.
 //!
-//! - Minimal samples: 4 points ([`homography_4pt`]) or 2 ACs ([`homography_2ac`]).
+//! - Minimal samples: 4 points ([`homography_4pt`]), 2 ACs ([`homography_2ac`]) or 1 AC and
+//!   2 points ([`homography_1ac2pt`]).
 //! - Non-minimal fit (local optimisation): the normalised DLT on the inliers
 //!   from its normal equations ([`homography_lsq_normal_equations`]), or on their ACs when
 //!   fewer than 4.
@@ -10,13 +11,16 @@
 //!   by A instead of A_H.
 
 use super::simd::{BLOCK, Lanes, UPPER_3X3, add_sums, dispatch};
-use super::{Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, homography_affine};
+use super::{
+    Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, homography_affine, hybrid_support,
+};
 use crate::loss::Loss;
 use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Mat9, Vec9, levenberg_marquardt};
 use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2};
 use affcorr_solvers::homography::{
-    homography_2ac, homography_4pt, homography_ac_lsq, homography_lsq_normal_equations,
+    homography_1ac2pt, homography_2ac, homography_4pt, homography_ac_lsq,
+    homography_lsq_normal_equations,
 };
 
 /// A homography problem over a set of correspondences.
@@ -103,12 +107,21 @@ impl Problem for HomographyProblem<'_> {
     }
 
     fn sample_support(&self, h: &Mat3, threshold_sq: f64) -> Option<usize> {
-        let w = SEED_AFFINE_WEIGHT;
-        (self.kind == SampleKind::Affine).then(|| {
+        let seeds = || {
             count_below(self.len(), threshold_sq, |i| {
-                self.residual_weighted(h, i, w)
+                self.residual_weighted(h, i, SEED_AFFINE_WEIGHT)
             })
-        })
+        };
+        match self.kind {
+            SampleKind::Points => None,
+            SampleKind::Affine => Some(seeds()),
+            SampleKind::Hybrid => {
+                let inliers = count_below(self.len(), threshold_sq, |i| {
+                    self.residual_weighted(h, i, 0.0)
+                });
+                Some(hybrid_support(seeds(), inliers, self.len(), 3))
+            }
+        }
     }
 
     fn positions(&self) -> Option<(&[Vec2], &[Vec2])> {
@@ -127,6 +140,7 @@ impl Problem for HomographyProblem<'_> {
         match self.kind {
             SampleKind::Points => 4,
             SampleKind::Affine => 2,
+            SampleKind::Hybrid => 3,
         }
     }
 
@@ -142,6 +156,11 @@ impl Problem for HomographyProblem<'_> {
                 let acs: [AffineCorrespondence; 2] =
                     std::array::from_fn(|k| self.data.ac(sample[k]));
                 homography_2ac(&acs, &mut h)
+            }
+            SampleKind::Hybrid => {
+                let x1 = [self.data.x1[sample[1]], self.data.x1[sample[2]]];
+                let x2 = [self.data.x2[sample[1]], self.data.x2[sample[2]]];
+                homography_1ac2pt(&self.data.ac(sample[0]), &x1, &x2, &mut h)
             }
         };
         out.extend_from_slice(&h[..n]);

@@ -60,6 +60,32 @@ pub enum SampleKind {
     Points,
     /// Affine correspondences (2 for H, 3 for F, 2 for E).
     Affine,
+    /// One AC and points (1 + 2 for H, 1 + 4 for F, 1 + 2 for E): the first index of a sample
+    /// is used with its A, the others as points. Fewer affine equations than an AC sample
+    /// (2 for E and F, 4 for H, against 4, 6 and 8), fewer correspondences than a point
+    /// sample.
+    Hybrid,
+}
+
+impl SampleKind {
+    /// Whether the minimal samples use A (so the data must carry it).
+    pub fn uses_affine(self) -> bool {
+        self != SampleKind::Points
+    }
+}
+
+/// The support that the stopping rule counts for a hybrid sample of `m` correspondences: its
+/// first must be a good AC (`seeds` of the `n` data can be, [`crate::Problem::sample_support`])
+/// and the other `m − 1` good points (`inliers`). An all-good draw comes with probability
+/// (s/n)·(i/n)^(m−1); the count returned, n·(s/n)^(1/m)·(i/n)^((m−1)/m), gives the same
+/// probability when raised to the m-th power as the rule does.
+pub(crate) fn hybrid_support(seeds: usize, inliers: usize, n: usize, m: usize) -> usize {
+    if n == 0 || m == 0 {
+        return 0;
+    }
+    let (s, i) = (seeds as f64 / n as f64, inliers as f64 / n as f64);
+    let p = s.powf(1.0 / m as f64) * i.powf((m - 1) as f64 / m as f64);
+    (p * n as f64).floor() as usize
 }
 
 /// Correspondences in structure-of-arrays form; `a` is empty for point-only data.
@@ -211,11 +237,16 @@ fn check_finite<const W: usize>(rows: &[[f64; W]]) -> Result<()> {
 
 /// Checks that `kind` can be sampled from `data`.
 pub(crate) fn check_kind(data: &Correspondences, kind: SampleKind) -> Result<()> {
-    if kind == SampleKind::Affine && !data.has_affine() {
+    if kind.uses_affine() && !data.has_affine() {
+        let value = if kind == SampleKind::Hybrid {
+            "hybrid"
+        } else {
+            "affine"
+        };
         return Err(RansacError::InvalidOption {
             name: "sample",
-            value: "affine".into(),
-            reason: "affine samples need (N, 8) correspondences with their A",
+            value: value.into(),
+            reason: "affine and hybrid samples need (N, 8) correspondences with their A",
         });
     }
     Ok(())

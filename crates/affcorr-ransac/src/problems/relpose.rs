@@ -1,7 +1,8 @@
 //! Relative pose (calibrated): X2 = R X1 + t from correspondences and intrinsics K1, K2.
 //!
 //! - Minimal samples in normalised coordinates (docs/design.md §2): 5 points
-//!   ([`relative_pose_5pt`], ≤ 10 poses) or 2 ACs ([`relative_pose_2ac`]); each essential matrix
+//!   ([`relative_pose_5pt`], ≤ 10 poses), 2 ACs ([`relative_pose_2ac`]) or 1 AC and 2 points
+//!   ([`relative_pose_1ac2pt`]); each essential matrix
 //!   is decomposed and only factorisations with the sample in front of both cameras are kept.
 //! - Non-minimal fit: the 8-point essential matrix on the inliers (plus their AC equations when
 //!   there are fewer than 8), decomposed with cheirality on those inliers.
@@ -20,13 +21,18 @@ use affcorr_geom::epipolar::{
 use affcorr_geom::{AffineCorrespondence, Mat3, Vec2, Vec3};
 use affcorr_solvers::essential::essential_lsq;
 use affcorr_solvers::relpose::{
-    RELPOSE_2AC_MAX_SOLUTIONS, RELPOSE_5PT_MAX_SOLUTIONS, relative_pose_2ac, relative_pose_5pt,
+    RELPOSE_1AC2PT_MAX_SOLUTIONS, RELPOSE_2AC_MAX_SOLUTIONS, RELPOSE_5PT_MAX_SOLUTIONS,
+    relative_pose_1ac2pt, relative_pose_2ac, relative_pose_5pt,
 };
 
-const MAX_POSES: usize = if RELPOSE_5PT_MAX_SOLUTIONS > RELPOSE_2AC_MAX_SOLUTIONS {
-    RELPOSE_5PT_MAX_SOLUTIONS
-} else {
-    RELPOSE_2AC_MAX_SOLUTIONS
+const MAX_POSES: usize = {
+    let m = [
+        RELPOSE_5PT_MAX_SOLUTIONS,
+        RELPOSE_2AC_MAX_SOLUTIONS,
+        RELPOSE_1AC2PT_MAX_SOLUTIONS,
+    ];
+    let ab = if m[0] > m[1] { m[0] } else { m[1] };
+    if ab > m[2] { ab } else { m[2] }
 };
 
 /// A pose with the pixel fundamental matrix it induces (cached for scoring).
@@ -172,13 +178,20 @@ impl Problem for RelativePoseProblem<'_> {
     }
 
     fn sample_support(&self, m: &PoseModel, threshold_sq: f64) -> Option<usize> {
-        epipolar_seeds(self.pixels, &m.fundamental, self.kind, threshold_sq)
+        epipolar_seeds(
+            self.pixels,
+            &m.fundamental,
+            self.kind,
+            self.sample_size(),
+            threshold_sq,
+        )
     }
 
     fn sample_size(&self) -> usize {
         match self.kind {
             SampleKind::Points => 5,
             SampleKind::Affine => 2,
+            SampleKind::Hybrid => 3,
         }
     }
 
@@ -197,6 +210,11 @@ impl Problem for RelativePoseProblem<'_> {
                 let acs: [AffineCorrespondence; 2] =
                     std::array::from_fn(|k| self.normalized.ac(sample[k]));
                 relative_pose_2ac(&acs, &mut poses)
+            }
+            SampleKind::Hybrid => {
+                let x1 = [self.normalized.x1[sample[1]], self.normalized.x1[sample[2]]];
+                let x2 = [self.normalized.x2[sample[1]], self.normalized.x2[sample[2]]];
+                relative_pose_1ac2pt(&self.normalized.ac(sample[0]), &x1, &x2, &mut poses)
             }
         };
         out.extend(poses[..n].iter().map(|p| self.model(*p)));
