@@ -33,7 +33,7 @@ MATCHES_VERSION = 1
 #: by its AC-guided view too, after the rotations. 8: the tilt-4 groups hold the tilts zoomed by
 #: 1/2 too. 9: the warps' directional blur computes its taps once away from the edges (the same
 #: views to float rounding).
-AFFCORR_PIPELINE_REVISION = 9
+AFFCORR_PIPELINE_REVISION = 10
 #: The Rust sources that make affcorr's matches, Cargo.lock (which pins ONNX Runtime's
 #: bindings and the rest) and the matcher's models (the shape model is in its own tag): their
 #: digest is in affcorr's cache keys too, so an experiment on the cascade that is not landed (or

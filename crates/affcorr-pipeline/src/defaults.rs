@@ -35,6 +35,18 @@ pub fn detection_threshold(matcher: Matcher) -> Option<f32> {
     (matcher == Matcher::AlikedLightGlue).then_some(ALIKED_DETECTION_THRESHOLD)
 }
 
+/// The median match certainty below which a verified plain pass is still rivalled by the
+/// rotated views ([`crate::views`]): 0.35 for XFeat + LighterGlue (its match probability;
+/// measured on its matches, benches/results/views_pose_board.md), `None` (not used) for the
+/// others, whose certainties are other quantities (XFeat's cosine similarity, XFeat*'s
+/// confidence, a dense warp's certainty) or were not measured (ALIKED's and DISK's LightGlue).
+pub fn rival_certainty(matcher: Matcher) -> Option<f64> {
+    (matcher == Matcher::XFeatLighterGlue).then_some(XFEAT_LIGHTERGLUE_RIVAL_CERTAINTY)
+}
+
+/// [`rival_certainty`] of XFeat + LighterGlue.
+pub const XFEAT_LIGHTERGLUE_RIVAL_CERTAINTY: f64 = 0.35;
+
 /// Matches a dense matcher draws when `max_matches` is not set. DKM draws 10 000; each costs a
 /// shape-network evaluation and a refinement, so fewer by default.
 pub const DENSE_MATCHES: usize = 2000;

@@ -33,7 +33,7 @@ use crate::source::ImageSource;
 use crate::views::{
     CONFIDENT_VIEW, REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec,
     WEAK_RATIO, WorkMeter, cascade_steps, guided_view, refinement_view, rival_views, screen,
-    screen_run, verified_fundamental, verify, weak_yield,
+    screen_run, uncertain, verified_fundamental, verify, weak_yield,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -731,10 +731,15 @@ impl Pipeline {
         let mut reported = meter.spent;
         // A weak verification (few of the matches agree) may be a repetitive pattern matched
         // at the wrong rotation: the rotated views are its rivals (see `views::WEAK_RATIO`).
-        // So may one verified by few inliers (`views::WEAK_YIELD`).
+        // So may one verified by few inliers (`views::WEAK_YIELD`), or by matches the
+        // matcher is unsure of (`views::uncertain`).
         let weak = verified
             && ((inliers as f64) < WEAK_RATIO * plain.corrs.len() as f64
-                || weak_yield(inliers, self.max_keypoints()));
+                || weak_yield(inliers, self.max_keypoints())
+                || uncertain(
+                    &plain.certainty,
+                    crate::defaults::rival_certainty(self.matcher()),
+                ));
         if verified && !weak && o.mode == ViewMode::Auto {
             reports[0].used = true;
             return Ok((plain, reports));

@@ -11,7 +11,9 @@
 //!    rarely fit it (benches/results/views.md has the measurement).
 //!    A pass that verifies only weakly (under [`WEAK_RATIO`] of its matches agree, or fewer
 //!    inliers than [`WEAK_YIELD`] of the keypoint budget: a repetitive pattern matched at
-//!    the wrong rotation looks like this) is rivalled by B rotated in 45° steps
+//!    the wrong rotation looks like this; or whose matches' median certainty is low: a
+//!    repetitive pattern matched a quarter turn off can agree almost wholly with one F, and
+//!    only its matcher is unsure of it) is rivalled by B rotated in 45° steps
 //!    ([`rival_views`], screened; those that do not stand out are not matched); a rival with
 //!    [`RIVAL_MARGIN`] times its inliers replaces it. Verified by fewer than
 //!    [`CONFIDENT_VIEW`] × min_inliers (too few to end the cascade on a synthetic view), it is
@@ -105,6 +107,28 @@ pub const WEAK_YIELD: f64 = 0.1;
 /// plain pass (rivals) and of a synthetic view (its refinement).
 pub(crate) fn weak_yield(inliers: usize, keypoint_budget: usize) -> bool {
     (inliers as f64) < WEAK_YIELD * keypoint_budget as f64
+}
+
+/// Whether the plain pass's matches are uncertain enough to be rivalled however well they
+/// verify: their median `certainty` is below `floor`, the matcher's
+/// ([`crate::defaults::rival_certainty`]; `None`: never). A repetitive pattern matched a
+/// quarter turn off can agree with one F by 70–80 % of its matches and over a tenth of the
+/// keypoint budget (the moving chessboard of benches/results/views_pose_board.md: 175 of 220
+/// where the right rotation has 413 of 460), so neither [`WEAK_RATIO`] nor [`WEAK_YIELD`]
+/// sees it; its matcher does, as a low certainty: LighterGlue's median match probability
+/// there was 0.16–0.30 on the wrongly registered boards (median 0.22) against 0.40–0.97 on
+/// the indoor stereo, rendered, planar and Middlebury pairs that the plain pass solves.
+pub(crate) fn uncertain(certainty: &[f64], floor: Option<f64>) -> bool {
+    let Some(floor) = floor else {
+        return false;
+    };
+    if certainty.is_empty() {
+        return false;
+    }
+    let mut c = certainty.to_vec();
+    let k = c.len() / 2;
+    let (_, median, _) = c.select_nth_unstable_by(k, f64::total_cmp);
+    *median < floor
 }
 
 /// A synthetic view (with its refinement) that verifies with fewer than this many times
@@ -795,6 +819,30 @@ pub(crate) fn verified_fundamental(corrs: &[[f64; 8]]) -> Result<Option<(Mat3, V
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn uncertain_compares_the_median_certainty_with_the_matchers_floor() {
+        // Median 0.3 (one very sure match does not lift it).
+        let c = [0.2, 0.99, 0.3, 0.25, 0.9];
+        assert!(uncertain(&c, Some(0.35)));
+        assert!(!uncertain(&c, Some(0.3)));
+        // A matcher without a floor, or no matches, is never uncertain.
+        assert!(!uncertain(&c, None));
+        assert!(!uncertain(&[], Some(0.35)));
+        // Only XFeat + LighterGlue's certainty is a measured match probability.
+        use affcorr_runner::Matcher;
+        assert_eq!(
+            crate::defaults::rival_certainty(Matcher::XFeatLighterGlue),
+            Some(0.35)
+        );
+        for m in [
+            Matcher::XFeatMnn,
+            Matcher::XFeatStar,
+            Matcher::AlikedLightGlue,
+        ] {
+            assert_eq!(crate::defaults::rival_certainty(m), None, "{m:?}");
+        }
+    }
 
     #[test]
     fn modes_parse_and_bad_options_are_named() {
