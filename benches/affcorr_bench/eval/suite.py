@@ -32,8 +32,10 @@ MATCHES_VERSION = 1
 #: refinement starts undamped). 7: a weak plain pass with enough inliers to be kept is rivalled
 #: by its AC-guided view too, after the rotations. 8: the tilt-4 groups hold the tilts zoomed by
 #: 1/2 too. 9: the warps' directional blur computes its taps once away from the edges (the same
-#: views to float rounding).
-AFFCORR_PIPELINE_REVISION = 10
+#: views to float rounding). 10: a plain pass whose matches' median certainty is low is rivalled
+#: by the rotations however well it verifies (views::uncertain). 11: A's tilt-4 groups meet B's
+#: 45° rotations too.
+AFFCORR_PIPELINE_REVISION = 11
 #: The Rust sources that make affcorr's matches, Cargo.lock (which pins ONNX Runtime's
 #: bindings and the rest) and the matcher's models (the shape model is in its own tag): their
 #: digest is in affcorr's cache keys too, so an experiment on the cascade that is not landed (or
