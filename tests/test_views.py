@@ -3,8 +3,9 @@ image B turned upside down, exactly, by numpy) is solved through a synthetic vie
 in the original pixels with A composed with the view's warp, and the report says which view.
 The Rust tests (crates/affcorr-pipeline/tests/views.rs) cover 135° and a 4x zoom; here also a
 steep tilt of a rotated pair (B turned by 200° and foreshortened 4x), which only a tilt view
-against a rotated view of B solves, and a 4x zoom whose kept view, verified with few inliers, is
-grown by guided re-matching."""
+against a rotated view of B solves, a 4x zoom whose kept view, verified with few inliers, is
+grown by guided re-matching, and a chessboard matched a quarter turn off, whose strongly verified
+but uncertain plain pass is rivalled by the rotated views."""
 
 from __future__ import annotations
 
@@ -222,3 +223,45 @@ def test_a_view_kept_with_a_weak_yield_is_grown_from_its_inliers():
     # A pair whose plain pass verifies with a strong yield is not grown.
     upright = _pipe("auto").match_pair(a, b)
     assert upright.views[0]["used"] and upright.timings["guided"] == 0
+
+
+def _chessboard(nx: int = 9, ny: int = 6, square: int = 40, margin: int = 60) -> np.ndarray:
+    """A chessboard of nx x ny squares on mid grey, uint8."""
+    img = np.full((ny * square + 2 * margin, nx * square + 2 * margin), 128, np.uint8)
+    for j in range(ny):
+        for i in range(nx):
+            y, x = margin + j * square, margin + i * square
+            img[y : y + square, x : x + square] = 20 if (i + j) % 2 == 0 else 235
+    return img
+
+
+def test_a_board_matched_a_quarter_turn_off_is_rivalled_for_its_uncertain_matches():
+    """A chessboard and the same board turned by 105°: the plain pass matches the squares a
+    quarter turn off, and most of its matches agree with one F, more than a tenth of the keypoint
+    budget (weak neither by share nor by yield). LighterGlue is unsure of them (a low median
+    certainty), which sends the pass to the rotated rivals, and B turned by 270° registers the
+    board (docs/pipeline.md, "Rotated pairs")."""
+    cv2 = pytest.importorskip("cv2")
+    a = _chessboard()
+    h, w = a.shape
+    angle = np.radians(105.0)
+    c, s = np.cos(angle), np.sin(angle)
+    centre = np.array([w / 2, h / 2])
+    H = np.eye(3)  # noqa: N806
+    H[:2, :2] = [[c, -s], [s, c]]
+    H[:2, 2] = centre - H[:2, :2] @ centre
+    b = cv2.warpPerspective(a, H, (w, h), borderValue=128)
+
+    def correct(res) -> float:
+        x = np.c_[res.corrs[:, :2], np.ones(len(res.corrs))] @ H.T
+        return float(np.mean(np.linalg.norm(x[:, :2] / x[:, 2:] - res.corrs[:, 2:4], axis=1) < 3))
+
+    off = _pipe("off").match_pair(a, b)
+    assert correct(off) < 0.05
+    res = _pipe("auto").match_pair(a, b)
+    plain = res.views[0]
+    assert plain["label"] == "plain" and plain["verified"]
+    assert plain["inliers"] >= 0.6 * plain["matches"] and plain["inliers"] >= 0.1 * 1024
+    assert np.median(off.certainty) < 0.35
+    assert res.view["label"] == "B rot 270°"
+    assert correct(res) > 0.7
