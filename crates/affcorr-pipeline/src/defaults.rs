@@ -37,7 +37,8 @@ pub fn detection_threshold(matcher: Matcher) -> Option<f32> {
 
 /// The median match certainty below which a verified plain pass is still rivalled by the
 /// rotated views ([`crate::views`]): 0.35 for XFeat + LighterGlue (its match probability;
-/// measured on its matches, benches/results/views_pose_board.md), `None` (not used) for the
+/// chosen from its matches' certainty on solved and wrongly registered pairs, docs/pipeline.md
+/// "Rotated pairs"), `None` (not used) for the
 /// others, whose certainties are other quantities (XFeat's cosine similarity, XFeat*'s
 /// confidence, a dense warp's certainty) or were not measured (ALIKED's and DISK's LightGlue).
 pub fn rival_certainty(matcher: Matcher) -> Option<f64> {

@@ -112,12 +112,10 @@ pub(crate) fn weak_yield(inliers: usize, keypoint_budget: usize) -> bool {
 /// Whether the plain pass's matches are uncertain enough to be rivalled however well they
 /// verify: their median `certainty` is below `floor`, the matcher's
 /// ([`crate::defaults::rival_certainty`]; `None`: never). A repetitive pattern matched a
-/// quarter turn off can agree with one F by 70–80 % of its matches and over a tenth of the
-/// keypoint budget (the moving chessboard of benches/results/views_pose_board.md: 175 of 220
-/// where the right rotation has 413 of 460), so neither [`WEAK_RATIO`] nor [`WEAK_YIELD`]
-/// sees it; its matcher does, as a low certainty: LighterGlue's median match probability
-/// there was 0.16–0.30 on the wrongly registered boards (median 0.22) against 0.40–0.97 on
-/// the indoor stereo, rendered, planar and Middlebury pairs that the plain pass solves.
+/// quarter turn off can agree with one F by most of its matches and more than
+/// [`WEAK_YIELD`] of the keypoint budget, so neither [`WEAK_RATIO`] nor [`WEAK_YIELD`] sees
+/// it; its matcher does, as a low median certainty (the measurements: docs/pipeline.md,
+/// "Rotated pairs").
 pub(crate) fn uncertain(certainty: &[f64], floor: Option<f64>) -> bool {
     let Some(floor) = floor else {
         return false;
@@ -574,9 +572,8 @@ pub fn cascade_steps() -> Vec<Step> {
     // Tilts t of `image` in n directions (zoomed by s) against the other image as it is and
     // rotated by 270°, 90° and 180°: a steep tilt of a rotated pair needs both undone at once,
     // and the rotated images are the rivals' (B) or shared by the group (A). A's tilt 4 meets
-    // B's 45° rotations too: what tilt 4 leaves of an 80° tilt (a residual tilt of about 1.5)
-    // and up to 45° of rotation together were beyond the matcher (the varied extreme set's
-    // 80° tilts of gravel and smarties, rolled 34–118°: no view screened above the noise).
+    // B's 45° rotations too: what tilt 4 leaves of an 80° tilt and up to 45° of roll together
+    // were beyond the matcher (docs/pipeline.md, "Extreme viewpoints beyond experiment 4").
     // B's rotated images are extracted for the rivals already, so the extra views cost their
     // screens; B's tilts would need four more extractions of A, and solved nothing more.
     let rotated_tilts = |image, s: f64, t: f64, n: usize| {
