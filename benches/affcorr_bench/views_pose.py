@@ -2,15 +2,16 @@
 turned by 0, 30, 90, 135 and 180 deg.
 
     .venv/bin/python -m affcorr_bench.views_pose [--synthetic 20] [--max-keypoints 1024]
-        [--threads 2] [--board-only --out benches/results/views_pose_board]
+        [--threads 2] [--matcher NAME] [--board-only --out benches/results/views_pose_board]
 
 Pairs: experiment 3's (affcorr_bench.eval.pose_data): rendered multi-plane scenes with parallax
 (the first ``--synthetic``) and the chessboard stereo set, each with exact K1, K2, R, t. Image B
 is rotated about its centre on a canvas that holds it (affcorr_bench.views.rotated); each pair
 runs through affcorr.Pipeline with views="off" and views="auto" (everything else the defaults
-but max_keypoints and threads), the ACs are mapped back into B's original pixels by the
-rotation's inverse (x2 = M^-1 x2', A = M^-1 A'), and affcorr.estimate_relative_pose estimates
-the pose with the original K2 at the default threshold. The rotation only changes what the
+but max_keypoints, threads and, with ``--matcher``, the matcher), the ACs are mapped back into
+B's original pixels by the rotation's inverse (x2 = M^-1 x2', A = M^-1 A'), and
+affcorr.estimate_relative_pose estimates the pose with the original K2 at the default
+threshold. The rotation only changes what the
 matcher sees, so an upright pair's figures are what a rotated one should reach.
 
 In the chessboard set's left views the camera stands still and the board moves: the pose is the
@@ -76,6 +77,9 @@ def main(argv=None) -> None:
     )
     p.add_argument("--synthetic", type=int, default=20, help="rendered pairs")
     p.add_argument("--max-keypoints", type=int, default=1024)
+    p.add_argument(
+        "--matcher", default=None, help="the pipeline's matcher (default: the pipeline's default)"
+    )
     p.add_argument("--threads", type=int, default=2)
     p.add_argument(
         "--rotations",
@@ -101,10 +105,13 @@ def main(argv=None) -> None:
         pairs = [pp for pp in pose_data.chessboard_pairs() if pp.region is not None]
     else:
         pairs = pose_data.synthetic_pairs(args.synthetic) + pose_data.chessboard_pairs()
+    matcher = args.matcher or PIPELINE_DEFAULTS["matcher"]
     rotations = [int(r) for r in args.rotations.split(",") if r.strip()]
     modes = [m.strip() for m in args.modes.split(",") if m.strip()]
     pipes = {
-        mode: affcorr.Pipeline(max_keypoints=args.max_keypoints, threads=args.threads, views=mode)
+        mode: affcorr.Pipeline(
+            matcher=matcher, max_keypoints=args.max_keypoints, threads=args.threads, views=mode
+        )
         for mode in modes
     }
     thr = PIPELINE_DEFAULTS["pose_threshold"]
@@ -176,7 +183,7 @@ def main(argv=None) -> None:
         f"Command: `{common.command(__spec__.name)}`",
         "",
         f"Date: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}. affcorr "
-        f"{affcorr.__version__}; matcher {PIPELINE_DEFAULTS['matcher']} at "
+        f"{affcorr.__version__}; matcher {matcher} at "
         f"{args.max_keypoints} keypoints, {args.threads} threads; pose threshold {thr} px. "
         f"{len(cases)} cases in {time.time() - t0:.0f} s; load average at the end "
         f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} on 2 cores.",

@@ -836,16 +836,22 @@ mod tests {
         // A matcher without a floor, or no matches, is never uncertain.
         assert!(!uncertain(&c, None));
         assert!(!uncertain(&[], Some(0.35)));
-        // Only XFeat + LighterGlue's certainty is a measured match probability.
+        // Only the LightGlue matchers' certainties measured on solved and wrongly registered
+        // pairs are match probabilities with a floor.
         use affcorr_runner::Matcher;
         assert_eq!(
             crate::defaults::rival_certainty(Matcher::XFeatLighterGlue),
             Some(0.35)
         );
+        assert_eq!(
+            crate::defaults::rival_certainty(Matcher::AlikedLightGlue),
+            Some(0.3)
+        );
         for m in [
             Matcher::XFeatMnn,
             Matcher::XFeatStar,
-            Matcher::AlikedLightGlue,
+            Matcher::DiskLightGlue,
+            Matcher::Dense,
         ] {
             assert_eq!(crate::defaults::rival_certainty(m), None, "{m:?}");
         }
