@@ -11,6 +11,7 @@
 use super::simd::dispatch;
 use super::{
     Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, epipolar_lm, hybrid_support,
+    most_models,
 };
 use crate::loss::Loss;
 use crate::problem::Problem;
@@ -20,16 +21,17 @@ use affcorr_geom::homography::ac_from_homography;
 use affcorr_geom::sampson::{sampson_affine, sampson_point};
 use affcorr_geom::{AffineCorrespondence, Mat3, PointCorrespondence, Vec2, Vec3};
 use affcorr_solvers::fundamental::{
-    FUNDAMENTAL_3AC_MAX_SOLUTIONS, FUNDAMENTAL_7PT_MAX_SOLUTIONS, fundamental_1ac4pt,
-    fundamental_3ac, fundamental_7pt, fundamental_8pt_normal_equations, fundamental_ac_lsq,
+    FUNDAMENTAL_1AC4PT_MAX_SOLUTIONS, FUNDAMENTAL_3AC_MAX_SOLUTIONS, FUNDAMENTAL_7PT_MAX_SOLUTIONS,
+    fundamental_1ac4pt, fundamental_3ac, fundamental_7pt, fundamental_8pt_normal_equations,
+    fundamental_ac_lsq,
 };
 use affcorr_solvers::homography::homography_2ac;
 
-const MAX_MODELS: usize = if FUNDAMENTAL_7PT_MAX_SOLUTIONS > FUNDAMENTAL_3AC_MAX_SOLUTIONS {
-    FUNDAMENTAL_7PT_MAX_SOLUTIONS
-} else {
-    FUNDAMENTAL_3AC_MAX_SOLUTIONS
-};
+const MAX_MODELS: usize = most_models(&[
+    FUNDAMENTAL_7PT_MAX_SOLUTIONS,
+    FUNDAMENTAL_3AC_MAX_SOLUTIONS,
+    FUNDAMENTAL_1AC4PT_MAX_SOLUTIONS,
+]);
 
 /// A fundamental-matrix problem over a set of correspondences.
 pub struct FundamentalProblem<'a> {

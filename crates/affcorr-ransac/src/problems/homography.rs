@@ -119,7 +119,12 @@ impl Problem for HomographyProblem<'_> {
                 let inliers = count_below(self.len(), threshold_sq, |i| {
                     self.residual_weighted(h, i, 0.0)
                 });
-                Some(hybrid_support(seeds(), inliers, self.len(), 3))
+                Some(hybrid_support(
+                    seeds(),
+                    inliers,
+                    self.len(),
+                    self.sample_size(),
+                ))
             }
         }
     }

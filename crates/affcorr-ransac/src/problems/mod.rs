@@ -74,6 +74,19 @@ impl SampleKind {
     }
 }
 
+/// The largest of `sizes`: the buffer a problem's minimal solvers write into must hold the
+/// most models any of them returns.
+pub(crate) const fn most_models(sizes: &[usize]) -> usize {
+    let (mut most, mut k) = (0, 0);
+    while k < sizes.len() {
+        if sizes[k] > most {
+            most = sizes[k];
+        }
+        k += 1;
+    }
+    most
+}
+
 /// The support that the stopping rule counts for a hybrid sample of `m` correspondences: its
 /// first must be a good AC (`seeds` of the `n` data can be, [`crate::Problem::sample_support`])
 /// and the other `m − 1` good points (`inliers`). An all-good draw comes with probability

@@ -10,7 +10,7 @@
 //!   for any fx ≠ fy (no mean-focal approximation), plus the weighted affine Sampson distances.
 
 use super::fundamental::{AffineScore, epipolar_residuals, epipolar_residuals_at, epipolar_seeds};
-use super::{Correspondences, SampleKind, epipolar_lm};
+use super::{Correspondences, SampleKind, epipolar_lm, most_models};
 use crate::loss::Loss;
 use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Mat9, Vec9, levenberg_marquardt};
@@ -25,15 +25,11 @@ use affcorr_solvers::relpose::{
     relative_pose_1ac2pt, relative_pose_2ac, relative_pose_5pt,
 };
 
-const MAX_POSES: usize = {
-    let m = [
-        RELPOSE_5PT_MAX_SOLUTIONS,
-        RELPOSE_2AC_MAX_SOLUTIONS,
-        RELPOSE_1AC2PT_MAX_SOLUTIONS,
-    ];
-    let ab = if m[0] > m[1] { m[0] } else { m[1] };
-    if ab > m[2] { ab } else { m[2] }
-};
+const MAX_POSES: usize = most_models(&[
+    RELPOSE_5PT_MAX_SOLUTIONS,
+    RELPOSE_2AC_MAX_SOLUTIONS,
+    RELPOSE_1AC2PT_MAX_SOLUTIONS,
+]);
 
 /// A pose with the pixel fundamental matrix it induces (cached for scoring).
 #[derive(Debug, Clone, Copy, PartialEq)]
