@@ -160,8 +160,8 @@ def _random_shapes(rng: np.random.Generator, n: int) -> np.ndarray:
 
 
 def make_scene(rng: np.random.Generator, problem: str, n: int, s: dict) -> dict:
-    """One scene: ``corrs`` (n, 8), ``inlier`` (n,), K1, K2, R, t (X2 = R X1 + t, |t| = 1) and,
-    for one plane, the true ``H``."""
+    """One scene: ``corrs`` (n, 8), ``inlier`` (n,), ``exact_a`` (n, 4: each A before its
+    noise), K1, K2, R, t (X2 = R X1 + t, |t| = 1) and, for one plane, the true ``H``."""
     k1 = _intrinsics(rng, s["aniso"])
     k2 = _intrinsics(rng, s["aniso"]) if s["aniso"] else k1.copy()
     planes = 1 if problem == "homography" else s["planes"]
@@ -230,6 +230,7 @@ def make_scene(rng: np.random.Generator, problem: str, n: int, s: dict) -> dict:
         extra = s["px"] * np.sqrt(TAIL_SCALE**2 - 1)
         x1[wide] += rng.normal(0, extra, (wide.sum(), 2))
         x2[wide] += rng.normal(0, extra, (wide.sum(), 2))
+    exact_a = a
     noise = rng.normal(0, 1, (len(a), 2, 2)) * s["aff"]
     a = (a.reshape(-1, 2, 2) @ (np.eye(2) + noise)).reshape(-1, 4)
     n_out = n - len(x1)
@@ -244,7 +245,13 @@ def make_scene(rng: np.random.Generator, problem: str, n: int, s: dict) -> dict:
     inlier = np.r_[np.ones(len(x1), bool), np.zeros(n_out, bool)]
     order = rng.permutation(n)
     scene = dict(
-        corrs=corrs[order], inlier=inlier[order], K1=k1, K2=k2, R=r, t=t / np.linalg.norm(t)
+        corrs=corrs[order],
+        inlier=inlier[order],
+        exact_a=np.vstack([exact_a, out[:, 4:]])[order],
+        K1=k1,
+        K2=k2,
+        R=r,
+        t=t / np.linalg.norm(t),
     )
     if problem == "homography":
         scene["H"] = hs[0] / hs[0][2, 2]
