@@ -32,8 +32,9 @@ use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
 use crate::views::{
     CONFIDENT_VIEW, REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec,
-    WEAK_RATIO, WorkMeter, cascade_steps, guided_view, refinement_view, rival_views, screen,
-    screen_run, uncertain, verified_fundamental, verify, weak_yield,
+    WEAK_RATIO, WorkMeter, cascade_steps, guided_view, planar_rival, planar_support,
+    refinement_view, rival_views, screen, screen_run, uncertain, verified_fundamental, verify,
+    weak_yield,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -786,6 +787,8 @@ impl Pipeline {
         // The views of screened groups past their best: tried once every step has run.
         let mut deferred: Vec<(f64, ViewSpec, Option<usize>)> = Vec::new();
         let (mut best, mut best_inliers) = (plain, if verified { inliers } else { 0 });
+        // The kept pass's `views::planar_support`, once a rival needs it.
+        let mut best_planar: Option<usize> = None;
         let mut best_index = 0;
         // A view whose matches partly agree (too few to verify) guides the next one: the
         // dominant map of its agreeing ACs, in the original images, is undone first.
@@ -929,11 +932,22 @@ impl Pipeline {
                 used: false,
             });
             reported = store.meter.spent;
-            let better = verified && inliers > best_inliers && inliers >= rival_floor;
+            // Short of the rival margin, a view that outnumbers the kept pass wins by one plane's
+            // support instead (`views::planar_rival`); the kept pass's is computed once.
+            let outnumbers = verified && inliers > best_inliers;
+            let better = outnumbers
+                && (inliers >= rival_floor || {
+                    let kept = match best_planar {
+                        Some(k) => k,
+                        None => *best_planar.insert(planar_support(&best.corrs)?),
+                    };
+                    planar_rival(planar_support(&corrs)?, kept)
+                });
             if better {
                 best_index = reports.len() - 1;
                 best_inliers = inliers;
                 best = WorkMatches { corrs, ..m };
+                best_planar = None;
             }
             if o.mode == ViewMode::Auto && (better || refining) {
                 // Few inliers (in number, or for the keypoint budget, as `views::WEAK_YIELD`

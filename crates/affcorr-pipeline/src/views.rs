@@ -15,7 +15,8 @@
 //!    repetitive pattern matched a quarter turn off can agree almost wholly with one F, and
 //!    only its matcher is unsure of it) is rivalled by B rotated in 45° steps
 //!    ([`rival_views`], screened; those that do not stand out are not matched); a rival with
-//!    [`RIVAL_MARGIN`] times its inliers replaces it. Verified by fewer than
+//!    [`RIVAL_MARGIN`] times its inliers replaces it, or one with more inliers and
+//!    [`RIVAL_MARGIN`] times its support by one homography (`planar_rival`). Verified by fewer than
 //!    [`CONFIDENT_VIEW`] × min_inliers (too few to end the cascade on a synthetic view), it is
 //!    rivalled by every view of step 2, the one its inliers guide right after the rotations
 //!    (a steep tilt verifies with a dozen or two matches); verified by more, by the rotations
@@ -102,6 +103,38 @@ pub const RIVAL_MARGIN: f64 = 1.5;
 /// agreed 48 of 53, 81 of 123 and 96 of 157 at a wrong rotation; upright they had 138–222
 /// inliers at 1024 keypoints) and only the number of inliers tells them from the right one.
 pub const WEAK_YIELD: f64 = 0.1;
+
+/// The transfer threshold (px) of the homography that measures a pass's support by one plane
+/// (`planar_support`, which breaks near-ties between rivals).
+pub const PLANAR_THRESHOLD: f64 = 3.0;
+
+/// A view that outnumbers the kept pass's verified inliers but falls short of
+/// [`RIVAL_MARGIN`] replaces it when its [`planar_support`] is [`RIVAL_MARGIN`] times the
+/// kept pass's. A repetitive pattern registered at a wrong rotation (a chessboard a quarter
+/// turn off) fits some F with most of its matches, since an epipolar line leaves a match one
+/// degree of freedom, but fits a homography poorly; the right registration's dominant plane
+/// does (the board views of benches/results/views_pose_board.md: docs/pipeline.md, "Rotated
+/// pairs").
+pub(crate) fn planar_rival(view: usize, kept: usize) -> bool {
+    view as f64 >= RIVAL_MARGIN * kept.max(1) as f64
+}
+
+/// The inliers of the best homography of the matches' points at [`PLANAR_THRESHOLD`]: how much
+/// of a pass one plane explains (0 without a model).
+pub(crate) fn planar_support(corrs: &[[f64; 8]]) -> Result<usize> {
+    if corrs.len() < 8 {
+        return Ok(0);
+    }
+    let rows: Vec<[f64; 4]> = corrs.iter().map(|r| [r[0], r[1], r[2], r[3]]).collect();
+    let data = Correspondences::from_point_rows(&rows)?;
+    let mut o = EstimatorOptions::default();
+    o.ransac.threshold = PLANAR_THRESHOLD;
+    match estimate_homography(&data, &o) {
+        Ok(e) => Ok(e.num_inliers),
+        Err(RansacError::NoModel { .. }) => Ok(0),
+        Err(e) => Err(e.into()),
+    }
+}
 
 /// Whether `inliers` are fewer than [`WEAK_YIELD`] of the keypoint budget: the yardstick of the
 /// plain pass (rivals) and of a synthetic view (its refinement).
@@ -855,6 +888,48 @@ mod tests {
         ] {
             assert_eq!(crate::defaults::rival_certainty(m), None, "{m:?}");
         }
+    }
+
+    #[test]
+    fn planar_support_tells_one_plane_from_parallax_that_fits_an_f() {
+        use affcorr_geom::Vec2;
+        use affcorr_geom::homography::ac_from_homography;
+        let plane = Mat3::new(0.9, 0.08, 25.0, -0.05, 1.1, 12.0, 1e-4, -6e-5, 1.0);
+        // A grid of 200 points of image A; a deterministic spread of depths for the parallax.
+        let grid: Vec<(f64, f64)> = (0..200)
+            .map(|i| (20.0 + 30.0 * (i % 20) as f64, 20.0 + 45.0 * (i / 20) as f64))
+            .collect();
+        let planar: Vec<[f64; 8]> = grid
+            .iter()
+            .map(|&(x, y)| {
+                ac_from_homography(&plane, &Vec2::new(x, y), 0)
+                    .unwrap()
+                    .to_row()
+            })
+            .collect();
+        // A sideways camera motion: every match on its (horizontal) epipolar line, shifted by
+        // its own depth's disparity of 10-100 px. One F explains them all, one H few.
+        let parallax: Vec<[f64; 8]> = grid
+            .iter()
+            .enumerate()
+            .map(|(i, &(x, y))| {
+                let d = 10.0 + 90.0 * ((i as f64 * 12.9898).sin() * 43_758.545).fract().abs();
+                [x, y, x + d, y, 1.0, 0.0, 0.0, 1.0]
+            })
+            .collect();
+        let (kept_planar, kept_parallax) = (
+            planar_support(&planar).unwrap(),
+            planar_support(&parallax).unwrap(),
+        );
+        assert_eq!(kept_planar, 200);
+        assert!(kept_parallax < 40, "{kept_parallax}");
+        assert_eq!(verify(&parallax).unwrap().0, 200, "the parallax fits one F");
+        assert!(planar_rival(kept_planar, kept_parallax));
+        assert!(!planar_rival(kept_parallax, kept_planar));
+        // The margin is RIVAL_MARGIN; a kept pass without a plane needs a rival of 2.
+        assert!(planar_rival(3, 2) && !planar_rival(2, 2));
+        assert!(planar_rival(2, 0) && !planar_rival(1, 0));
+        assert_eq!(planar_support(&planar[..7]).unwrap(), 0);
     }
 
     #[test]
