@@ -123,3 +123,32 @@ def test_rows_cached_before_a_field_existed_are_written(tmp_path):
         "a,0.12346,",
         "b,1.0,x",
     ]
+
+
+def test_cached_only_refuses_a_partial_table(monkeypatch):
+    """`--cached` with matches missing (a new pipeline revision, another shape model) stops,
+    naming them per matcher, before any result file is overwritten by a partial table."""
+    pairs = [pose_data.PosePair.__new__(pose_data.PosePair) for _ in range(3)]
+    monkeypatch.setattr(pose, "schedule", lambda names, data, grid: [("affcorr", p) for p in pairs])
+    monkeypatch.setattr(pose, "get_matches", lambda name, p, cached_only=False: None)
+    with pytest.raises(SystemExit, match="affcorr 3 of 3"):
+        pose.collect_jobs(["affcorr"], {}, {}, lambda msg: None, cached_only=True)
+
+
+def test_affcorr_matches_are_cached_per_pipeline_revision(tmp_path, monkeypatch):
+    """affcorr's cached matches carry the suite's pipeline revision and source digest: after a
+    change of the view cascade they are not served as they were."""
+    from affcorr_bench.eval import matchers, suite
+
+    pair = pose_data.PosePair.__new__(pose_data.PosePair)
+    monkeypatch.setattr(pose, "match_path", lambda name, p: tmp_path / f"{name}.npz")
+    monkeypatch.setattr(matchers, "shape_model_tag", lambda: "shape")
+    stale = "shape-p0-srcold"
+    np.savez(tmp_path / "affcorr.npz", x1=np.zeros((1, 2)), shape_tag=np.str_(stale))
+    assert pose.get_matches("affcorr", pair, cached_only=True) is None
+    current = f"shape-p{suite.AFFCORR_PIPELINE_REVISION}-src{suite.pipeline_source_digest()}"
+    np.savez(tmp_path / "affcorr.npz", x1=np.zeros((1, 2)), shape_tag=np.str_(current))
+    assert pose.get_matches("affcorr", pair, cached_only=True) is not None
+    # another matcher's A depends on the shape model only
+    np.savez(tmp_path / "sift.npz", x1=np.zeros((1, 2)), shape_tag=np.str_("shape"))
+    assert pose.get_matches("sift", pair, cached_only=True) is not None

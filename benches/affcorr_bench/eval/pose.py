@@ -164,14 +164,18 @@ def match_path(name: str, pair: pose_data.PosePair) -> Path:
 def get_matches(name: str, pair: pose_data.PosePair, cached_only: bool = False) -> dict | None:
     """x1, x2 (N, 2), A_own (N, 2, 2) or absent, A_affcorr, score, seconds (matching),
     seconds_shape (affcorr's shape network, when it ran). None if ``cached_only`` and not
-    cached."""
+    cached (for affcorr: not cached for the current shape model and pipeline)."""
     path = match_path(name, pair)
     tag = matchers.shape_model_tag()
+    if name == "affcorr":
+        # affcorr's matches depend on its pipeline's code too (the view cascade), as the
+        # suite's cache keys say (suite._key)
+        tag += f"-p{suite.AFFCORR_PIPELINE_REVISION}-src{suite.pipeline_source_digest()}"
     out = dict(np.load(path)) if path.exists() else None
     if out is not None and str(out.get("shape_tag", "")) == tag:
         return out
-    if out is None and cached_only:
-        return None
+    if cached_only and (out is None or name == "affcorr"):
+        return None  # affcorr's matches are its ACs: a stale one would mean matching again
     img1, img2 = pair.load()
     if out is None or name == "affcorr":  # affcorr's matches are its ACs: run it again
         m = matchers.run(name, img1, img2, max_keypoints=MAX_KEYPOINTS)
@@ -411,8 +415,13 @@ CHESS_STRIDE = 5
 
 
 def collect_jobs(names, data, grid, log, cached_only=False) -> list[dict]:
+    """Every (matcher, A source, pair) to estimate on. With ``cached_only`` a match that is not
+    cached (for the current shape model, and for affcorr its pipeline) is a SystemExit naming
+    how many per matcher: estimating on part of the pairs would overwrite the results with a
+    partial table."""
     jobs = []
     per_matcher = defaultdict(float)
+    missing: dict[str, int] = defaultdict(int)
     t0 = time.time()
     todo = schedule(names, data, grid)
     for step, (name, p) in enumerate(todo):
@@ -420,6 +429,7 @@ def collect_jobs(names, data, grid, log, cached_only=False) -> list[dict]:
             log(f"matches: {step}/{len(todo)} ({p.dataset} {p.name})")
         m = get_matches(name, p, cached_only)
         if m is None:
+            missing[name] += 1
             continue
         per_matcher[name] += float(m["seconds"])
         keep = p.keep(m["x1"], m["x2"])
@@ -434,6 +444,12 @@ def collect_jobs(names, data, grid, log, cached_only=False) -> list[dict]:
         f"matches: {len(todo)} (matcher, pair) in {time.time() - t0:.0f} s; matching seconds "
         + ", ".join(f"{k} {v:.0f}" for k, v in per_matcher.items())
     )
+    if missing:
+        raise SystemExit(
+            "--cached: matches not cached for the current shape model or pipeline: "
+            + ", ".join(f"{k} {v} of {sum(n == k for n, _ in todo)}" for k, v in missing.items())
+            + "; run without --cached to match them"
+        )
     MATCHING_SECONDS.update(per_matcher)
     return jobs
 
