@@ -126,9 +126,17 @@ pub(crate) fn planar_support(corrs: &[[f64; 8]]) -> Result<usize> {
         return Ok(0);
     }
     let rows: Vec<[f64; 4]> = corrs.iter().map(|r| [r[0], r[1], r[2], r[3]]).collect();
-    let data = Correspondences::from_point_rows(&rows)?;
+    let max_iterations = EstimatorOptions::default().ransac.max_iterations;
+    homography_inliers(&rows, PLANAR_THRESHOLD, max_iterations)
+}
+
+/// The inliers of affcorr's homography RANSAC on point `rows` (x1, y1, x2, y2) at `threshold`
+/// px within `max_iterations`; 0 without a model.
+fn homography_inliers(rows: &[[f64; 4]], threshold: f64, max_iterations: usize) -> Result<usize> {
+    let data = Correspondences::from_point_rows(rows)?;
     let mut o = EstimatorOptions::default();
-    o.ransac.threshold = PLANAR_THRESHOLD;
+    o.ransac.threshold = threshold;
+    o.ransac.max_iterations = max_iterations;
     match estimate_homography(&data, &o) {
         Ok(e) => Ok(e.num_inliers),
         Err(RansacError::NoModel { .. }) => Ok(0),
@@ -734,15 +742,7 @@ pub fn screen(a: &ImageFeatures, b: &ImageFeatures) -> Result<usize> {
             [p[0].into(), p[1].into(), q[0].into(), q[1].into()]
         })
         .collect();
-    let data = Correspondences::from_point_rows(&rows)?;
-    let mut o = EstimatorOptions::default();
-    o.ransac.threshold = SCREEN_THRESHOLD;
-    o.ransac.max_iterations = 1000;
-    match estimate_homography(&data, &o) {
-        Ok(e) => Ok(e.num_inliers),
-        Err(RansacError::NoModel { .. }) => Ok(0),
-        Err(e) => Err(e.into()),
-    }
+    homography_inliers(&rows, SCREEN_THRESHOLD, 1000)
 }
 
 /// The view that undoes the dominant affine map D of `inlier_acs` (their elementwise median):
