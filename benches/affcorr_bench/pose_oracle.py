@@ -245,7 +245,9 @@ def report(rows: list[dict], fams, args, elapsed: float) -> list[str]:
         "",
         *common.md_table(["family", "A <= 3%", *[h for h, _, _ in ratios]], ratio_rows),
         "",
-        "Median errors (rotation / translation, degrees):",
+        "Median errors (rotation / translation, degrees): "
+        + "; ".join(f"*{m}*: {d}" for m, d in METHODS if m in methods)
+        + ".",
         "",
         *common.md_table(["family", *methods], med_rows),
         "",
