@@ -161,13 +161,14 @@ pub(crate) fn uncertain(certainty: &[f64], floor: Option<f64>) -> bool {
     let Some(floor) = floor else {
         return false;
     };
-    if certainty.is_empty() {
-        return false;
-    }
-    let mut c = certainty.to_vec();
-    let k = c.len() / 2;
-    let (_, median, _) = c.select_nth_unstable_by(k, f64::total_cmp);
-    *median < floor
+    !certainty.is_empty() && median(certainty.to_vec()) < floor
+}
+
+/// The element at `values.len() / 2` in sorted order (the upper of the two middle ones for an
+/// even count); `values` must not be empty.
+fn median(mut values: Vec<f64>) -> f64 {
+    let k = values.len() / 2;
+    *values.select_nth_unstable_by(k, f64::total_cmp).1
 }
 
 /// A synthetic view (with its refinement) that verifies with fewer than this many times
@@ -774,12 +775,8 @@ fn dominant_map(acs: &[[f64; 8]]) -> Option<[f64; 4]> {
     if acs.len() < 8 {
         return None;
     }
-    let median = |k: usize| {
-        let mut v: Vec<f64> = acs.iter().map(|r| r[k]).collect();
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
-    };
-    Some([median(4), median(5), median(6), median(7)])
+    let entry = |k: usize| median(acs.iter().map(|r| r[k]).collect());
+    Some([entry(4), entry(5), entry(6), entry(7)])
 }
 
 /// |M − I| summed over the entries.
