@@ -46,8 +46,10 @@ from . import scene_families as sf
 
 
 def fundamental(k1: np.ndarray, k2: np.ndarray, r: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """F = K2⁻ᵀ [t]× R K1⁻¹, scaled to unit Frobenius norm."""
-    f = np.linalg.inv(k2).T @ common.skew(t) @ r @ np.linalg.inv(k1)
+    """F = K2⁻ᵀ [t]× R K1⁻¹ (affcorr's own conventions), scaled to unit Frobenius norm."""
+    import affcorr
+
+    f = affcorr.fundamental_from_essential(affcorr.essential_from_pose(r, t), k1, k2)
     return f / np.linalg.norm(f)
 
 
