@@ -148,16 +148,16 @@ def run(fams, seeds: int, n: int, peers: bool) -> list[dict]:
         errs = {}
         for use_a, name in ((False, "oracle-pts"), (True, "oracle-ac")):
             errs[name] = sf.pose_errors(*oracle_fit(sc, sc["inlier"], s["px"], s["aff"], use_a), sc)
-        for data, name in (("ac", "ac-auto"), ("pts", "pts-auto")):
-            out, _ = sf.run_affcorr("relpose", sc, jb["thr"], data, {})
-            errs[name] = sf.errors("relpose", out, sc)
-            if name == "ac-auto":
-                own = out["inliers"] if out is not None else None
-                errs["oracle-ac-own"] = (
-                    sf.pose_errors(*oracle_fit(sc, own, s["px"], s["aff"], True), sc)
-                    if own is not None and own.sum() >= 5
-                    else (180.0, 180.0)
-                )
+        ac, _ = sf.run_affcorr("relpose", sc, jb["thr"], "ac", {})
+        errs["ac-auto"] = sf.errors("relpose", ac, sc)
+        own = None if ac is None else ac["inliers"]
+        errs["oracle-ac-own"] = (
+            sf.pose_errors(*oracle_fit(sc, own, s["px"], s["aff"], True), sc)
+            if own is not None and own.sum() >= 5
+            else (180.0, 180.0)
+        )
+        pts, _ = sf.run_affcorr("relpose", sc, jb["thr"], "pts", {})
+        errs["pts-auto"] = sf.errors("relpose", pts, sc)
         for name, (e1, e2) in errs.items():
             rows.append(dict(family=jb["family"], seed=jb["seed"], method=name, rot=e1, trans=e2))
     if peers:
