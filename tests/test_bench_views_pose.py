@@ -38,3 +38,18 @@ def test_board_only_keeps_the_board_and_its_margin_and_greys_the_rest():
     assert out[60, 40 - m - 2] == grey
     assert (out[:10] == grey).all() and (out[:, :20] == grey).all() and (out[110:] == grey).all()
     assert out.dtype == img.dtype and out.shape == img.shape
+
+
+def test_the_pair_summary_names_each_dataset_with_its_count():
+    from collections import Counter
+
+    from affcorr_bench.views_pose import pair_summary
+
+    assert pair_summary(Counter({"synthetic": 12})) == (
+        "12 rendered multi-plane scenes with parallax"
+    )
+    text = pair_summary(Counter({"synthetic": 3, "chessboard-stereo": 13, "other": 2}))
+    assert text == (
+        "3 rendered multi-plane scenes with parallax, 13 chessboard pairs of experiment 3's "
+        "stereo rig and 2 other"
+    )

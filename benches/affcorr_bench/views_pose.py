@@ -71,6 +71,21 @@ def back_to_original(corrs: np.ndarray, M: np.ndarray) -> np.ndarray:  # noqa: N
     return out
 
 
+#: What each dataset's pairs are, for the result file.
+DATASET_TEXT = {
+    "synthetic": "rendered multi-plane scenes with parallax",
+    "chessboard": "chessboard pairs of experiment 3's moving-board left views (only their "
+    "matches on the board count)",
+    "chessboard-stereo": "chessboard pairs of experiment 3's stereo rig",
+}
+
+
+def pair_summary(counts: Counter) -> str:
+    """'12 rendered multi-plane scenes with parallax and 13 chessboard pairs of …'."""
+    parts = [f"{n} {DATASET_TEXT.get(d, d)}" for d, n in counts.items()]
+    return ", ".join(parts[:-1]) + " and " + parts[-1] if len(parts) > 1 else parts[0]
+
+
 def main(argv=None) -> None:
     p = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
@@ -92,6 +107,12 @@ def main(argv=None) -> None:
         action="store_true",
         help="only the chessboard's moving-board pairs, each image blanked outside the board",
     )
+    p.add_argument(
+        "--datasets",
+        default=None,
+        help="comma-separated datasets to keep (synthetic, chessboard, chessboard-stereo; "
+        "default: all)",
+    )
     p.add_argument("--out", default=str(common.RESULTS / "views_pose"))
     args = p.parse_args(argv)
 
@@ -105,6 +126,12 @@ def main(argv=None) -> None:
         pairs = [pp for pp in pose_data.chessboard_pairs() if pp.region is not None]
     else:
         pairs = pose_data.synthetic_pairs(args.synthetic) + pose_data.chessboard_pairs()
+    if args.datasets:
+        keep = {d.strip() for d in args.datasets.split(",") if d.strip()}
+        unknown = keep - {pp.dataset for pp in pairs}
+        if unknown:
+            p.error(f"--datasets {args.datasets}: no pairs of {', '.join(sorted(unknown))}")
+        pairs = [pp for pp in pairs if pp.dataset in keep]
     matcher = args.matcher or PIPELINE_DEFAULTS["matcher"]
     rotations = [int(r) for r in args.rotations.split(",") if r.strip()]
     modes = [m.strip() for m in args.modes.split(",") if m.strip()]
@@ -193,9 +220,7 @@ def main(argv=None) -> None:
             "image filled with its mean grey outside the board's outline, its corners pushed "
             f"{BOARD_MARGIN:.0f} px outwards (one motion: the board's)"
             if args.board_only
-            else f"Pairs: {args.synthetic} rendered multi-plane scenes with parallax and the "
-            f"{len(pairs) - args.synthetic} chessboard pairs of experiment 3 (moving-board "
-            "left views, only their matches on the board count; and the stereo rig)"
+            else "Pairs: " + pair_summary(Counter(pp.dataset for pp in pairs))
         )
         + ", image B rotated about its centre; the ACs are mapped back to B's pixels and the "
         "pose is estimated with the true intrinsics. Error: max(rotation, translation angle); "

@@ -36,15 +36,16 @@ pub fn detection_threshold(matcher: Matcher) -> Option<f32> {
 }
 
 /// The median match certainty below which a verified plain pass is still rivalled by the
-/// rotated views ([`crate::views`]): 0.35 for XFeat + LighterGlue and 0.3 for ALIKED +
-/// LightGlue (their match probabilities; chosen from their matches' certainty on solved and
-/// wrongly registered pairs, docs/pipeline.md "Rotated pairs"), `None` (not used) for the
-/// others, whose certainties are other quantities (XFeat's cosine similarity, XFeat*'s
-/// confidence, a dense warp's certainty) or were not measured (DISK's LightGlue).
+/// rotated views ([`crate::views`]): 0.35 for XFeat + LighterGlue and DISK + LightGlue, 0.3
+/// for ALIKED + LightGlue (their match probabilities; chosen from their matches' certainty on
+/// solved and wrongly registered pairs, docs/pipeline.md "Rotated pairs"), `None` (not used)
+/// for the others, whose certainties are other quantities (XFeat's cosine similarity,
+/// XFeat*'s confidence, a dense warp's certainty).
 pub fn rival_certainty(matcher: Matcher) -> Option<f64> {
     match matcher {
         Matcher::XFeatLighterGlue => Some(XFEAT_LIGHTERGLUE_RIVAL_CERTAINTY),
         Matcher::AlikedLightGlue => Some(ALIKED_LIGHTGLUE_RIVAL_CERTAINTY),
+        Matcher::DiskLightGlue => Some(DISK_LIGHTGLUE_RIVAL_CERTAINTY),
         _ => None,
     }
 }
@@ -54,6 +55,9 @@ pub const XFEAT_LIGHTERGLUE_RIVAL_CERTAINTY: f64 = 0.35;
 
 /// [`rival_certainty`] of ALIKED + LightGlue.
 pub const ALIKED_LIGHTGLUE_RIVAL_CERTAINTY: f64 = 0.3;
+
+/// [`rival_certainty`] of DISK + LightGlue.
+pub const DISK_LIGHTGLUE_RIVAL_CERTAINTY: f64 = 0.35;
 
 /// Matches a dense matcher draws when `max_matches` is not set. DKM draws 10 000; each costs a
 /// shape-network evaluation and a refinement, so fewer by default.

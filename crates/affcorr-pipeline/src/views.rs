@@ -866,8 +866,8 @@ mod tests {
         // A matcher without a floor, or no matches, is never uncertain.
         assert!(!uncertain(&c, None));
         assert!(!uncertain(&[], Some(0.35)));
-        // Only the LightGlue matchers' certainties measured on solved and wrongly registered
-        // pairs are match probabilities with a floor.
+        // Only the LightGlue matchers' certainties are match probabilities with a floor
+        // (measured on solved and wrongly registered pairs).
         use affcorr_runner::Matcher;
         assert_eq!(
             crate::defaults::rival_certainty(Matcher::XFeatLighterGlue),
@@ -877,12 +877,11 @@ mod tests {
             crate::defaults::rival_certainty(Matcher::AlikedLightGlue),
             Some(0.3)
         );
-        for m in [
-            Matcher::XFeatMnn,
-            Matcher::XFeatStar,
-            Matcher::DiskLightGlue,
-            Matcher::Dense,
-        ] {
+        assert_eq!(
+            crate::defaults::rival_certainty(Matcher::DiskLightGlue),
+            Some(0.35)
+        );
+        for m in [Matcher::XFeatMnn, Matcher::XFeatStar, Matcher::Dense] {
             assert_eq!(crate::defaults::rival_certainty(m), None, "{m:?}");
         }
     }
