@@ -57,3 +57,46 @@ def test_paired_ratios_are_per_scene_geometric_means():
     ]
     assert po.paired(rows, "f", "a", "b") == pytest.approx((1.0, 2.0))
     assert po.paired(rows, "g", "a", "b") is None
+
+
+def test_the_mixture_weights_find_the_scales_and_keep_the_outliers_out():
+    rng = np.random.default_rng(3)
+    vp, va = 0.25, 4e-5  # (0.5 px)², (A's noise in the affine Sampson units)²
+    n_in, n_out = 3000, 1500
+    inl = rng.normal(size=(n_in, 3))
+    out = rng.uniform(-40, 40, size=(n_out, 3))
+    z = np.r_[inl, out]
+    sp, sa = vp * z[:, 0] ** 2, va * (z[:, 1] ** 2 + z[:, 2] ** 2)
+    start = np.r_[np.ones(n_in), np.zeros(n_out)]
+    start[rng.choice(n_in, 200, replace=False)] = 0.0  # a hard set that missed some inliers
+    w, vp_hat, va_hat = po.mixture_weights(sp, sa, start)
+    assert vp_hat == pytest.approx(vp, rel=0.06)
+    assert va_hat == pytest.approx(va, rel=0.06)
+    # the inliers are in, including those the start left out; the outliers far out are not
+    assert w[:n_in].mean() > 0.97
+    q = z[n_in:] ** 2
+    far = q.sum(axis=1) > 49  # 7σ
+    assert w[n_in:][far].max() < 1e-3
+    assert w[n_in:].sum() < 5
+
+
+def test_the_soft_fit_keeps_an_exact_pose_and_lands_near_the_oracle_from_a_wrong_start():
+    sc, s = scene(31, px=1e-6, aff=1e-6)
+    exact = sf.pose_errors(*po.soft_fit(sc, sc["R"], sc["t"], sc["inlier"]), sc)
+    assert max(exact) < 1e-4
+    ratios = []
+    for seed in range(3):
+        rng = np.random.default_rng(40 + seed)
+        s = {**sf.BASE, "px": 1.0}  # half the matches outliers
+        sc = sf.make_scene(rng, "relpose", 3000, s)
+        # from a pose 0.45° off and the true pose: the same fit (the weights follow the pose)
+        r0 = po.Rotation.from_rotvec([0.006, -0.004, 0.003]).as_matrix() @ sc["R"]
+        soft = po.soft_fit(sc, r0, sc["t"], sc["inlier"])
+        again = po.soft_fit(sc, sc["R"], sc["t"], sc["inlier"])
+        assert max(sf.pose_errors(*soft, dict(R=again[0], t=again[1]))) < 0.01
+        # as close to the truth as the oracle, within the scatter of three scenes (an
+        # outlier let in would cost far more)
+        soft_err = sf.pose_errors(*soft, sc)
+        oracle = sf.pose_errors(*po.oracle_fit(sc, sc["inlier"], s["px"], s["aff"], True), sc)
+        ratios.append(np.sqrt(soft_err[0] * soft_err[1] / (oracle[0] * oracle[1])))
+    assert float(np.exp(np.mean(np.log(ratios)))) < 2.0, ratios

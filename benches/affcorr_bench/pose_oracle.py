@@ -3,6 +3,7 @@ true inliers allow a pose to be with their points only and with their points and
 affcorr's defaults and PoseLib on the same scenes.
 
     .venv/bin/python -m affcorr_bench.pose_oracle [--seeds 48] [--families NAME ...] [--no-peers]
+        [--soft-fit]
 
 writes benches/results/pose_oracle.{md,csv}. The scenes are scene_families' (``make_jobs``: the
 same seeds give the same scenes). PoseLib runs in benches/peers/.venv-peers as scene_families
@@ -100,29 +101,99 @@ def whitened_residuals(
     return np.linalg.solve(chol, residuals(f, corrs, use_a)[:, :, None]).ravel()
 
 
-def oracle_fit(
-    scene: dict, use: np.ndarray, px: float, aff: float, use_a: bool
-) -> tuple[np.ndarray, np.ndarray]:
-    """(R, t) minimising the whitened residuals of the correspondences ``use`` (a mask), by
-    Levenberg–Marquardt from the true pose: R = exp([ω]×) R_true, t on the unit sphere's
-    tangent plane at t_true."""
-    r0, t0 = scene["R"], scene["t"]
+def fit_pose(scene: dict, r0: np.ndarray, t0: np.ndarray, fun) -> tuple[np.ndarray, np.ndarray]:
+    """(R, t) minimising ``fun(F)`` (a residual vector) by Levenberg–Marquardt from (r0, t0):
+    R = exp([ω]×) r0, t on the unit sphere's tangent plane at t0."""
+    t0 = np.asarray(t0, float).ravel()
     other = np.array([1.0, 0, 0]) if abs(t0[0]) < 0.9 else np.array([0, 1.0, 0])
     b1 = np.cross(t0, other)
     b1 /= np.linalg.norm(b1)
     b2 = np.cross(t0, b1)
-    corrs, exact_a = scene["corrs"][use], scene["exact_a"][use]
 
     def pose(p):
         t = t0 + p[3] * b1 + p[4] * b2
         return Rotation.from_rotvec(p[:3]).as_matrix() @ r0, t / np.linalg.norm(t)
 
-    def fun(p):
-        f = fundamental(scene["K1"], scene["K2"], *pose(p))
-        return whitened_residuals(f, corrs, exact_a, px, aff, use_a)
+    def cost(p):
+        return fun(fundamental(scene["K1"], scene["K2"], *pose(p)))
 
     tol = dict(ftol=1e-14, xtol=1e-14, gtol=1e-14)
-    return pose(least_squares(fun, np.zeros(5), method="lm", x_scale="jac", **tol).x)
+    return pose(least_squares(cost, np.zeros(5), method="lm", x_scale="jac", **tol).x)
+
+
+def oracle_fit(
+    scene: dict, use: np.ndarray, px: float, aff: float, use_a: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """(R, t) minimising the whitened residuals of the correspondences ``use`` (a mask), from
+    the true pose (``fit_pose``)."""
+    corrs, exact_a = scene["corrs"][use], scene["exact_a"][use]
+    return fit_pose(
+        scene,
+        scene["R"],
+        scene["t"],
+        lambda f: whitened_residuals(f, corrs, exact_a, px, aff, use_a),
+    )
+
+
+#: The whitened residual q of a datum beyond which the mixture takes the outliers' density
+#: (its χ²₃ inlier tail there is 3 % of the inliers, beyond the band's end 2e-5).
+OUTLIER_BAND = (9.0, 25.0)
+
+
+def mixture_weights(
+    sp: np.ndarray, sa: np.ndarray, w: np.ndarray, iters: int = 5
+) -> tuple[np.ndarray, float, float]:
+    """EM of the soft inlier set (``soft_fit``): (weights, σ_P², σ_A²) from the point Sampson
+    errors ``sp`` (N,), the sums of the two affine ones ``sa`` (N,) and starting weights ``w``.
+
+    An inlier's q = SD_P/σ_P² + SD_A/σ_A² is χ²₃ (one point and two affine terms); the
+    outliers' density near the inliers is taken as c·√q (data spread uniformly in the three
+    residuals) with c from the data in ``OUTLIER_BAND``, less the inliers expected there. The
+    posterior inlier probability is then 1/(1 + β e^{q/2}), β = c√(2π)/N_inliers, and the
+    scales are the weighted means (χ²₁ per term)."""
+    from scipy.stats import chi2
+
+    lo, hi = OUTLIER_BAND
+    inlier_share = chi2.cdf(hi, 3) - chi2.cdf(lo, 3)
+    w = np.asarray(w, float)
+    for _ in range(iters):
+        vp = np.sum(w * sp) / np.sum(w)
+        va = np.sum(w * sa) / (2 * np.sum(w))
+        q = sp / vp + sa / va
+        n_in = w.sum()
+        beyond = np.sum((q > lo) & (q < hi)) - n_in * inlier_share
+        c = max(beyond, 0.5) / ((2 / 3) * (hi**1.5 - lo**1.5))
+        beta = np.sqrt(2 * np.pi) * c / n_in
+        w = 1 / (1 + beta * np.exp(np.minimum(q / 2, 700)))
+    return w, vp, va
+
+
+def soft_fit(
+    scene: dict, r: np.ndarray, t: np.ndarray, inliers: np.ndarray, rounds: int = 4
+) -> tuple[np.ndarray, np.ndarray]:
+    """The relative pose refitted from (r, t) on a soft inlier set: each round the
+    ``mixture_weights`` of every correspondence under the current pose, then the fit of the
+    weighted, whitened point and affine Sampson residuals. A probe for issue 22 (is the hard
+    inlier set what keeps ac-auto from the oracle?), not an estimator of the library:
+    docs/estimation.md, "What A can give"."""
+    import affcorr
+
+    corrs = scene["corrs"]
+    w = np.asarray(inliers, float)
+    for _ in range(rounds):
+        f = fundamental(scene["K1"], scene["K2"], r, t)
+        sp = affcorr.sampson_point(f, corrs)
+        sa = affcorr.sampson_affine(f, corrs).sum(axis=1)
+        w, vp, va = mixture_weights(sp, sa, w)
+        use = w > 1e-3
+        c, root_w = corrs[use], np.sqrt(w[use])[:, None]
+
+        def fun(f, c=c, root_w=root_w, vp=vp, va=va):
+            terms = np.c_[affcorr.sampson_point(f, c) / vp, affcorr.sampson_affine(f, c) / va]
+            return (root_w * np.sqrt(terms)).ravel()
+
+        r, t = fit_pose(scene, r, t, fun)
+    return r, t
 
 
 #: Result columns: (name, what it is).
@@ -132,11 +203,12 @@ METHODS = (
     ("oracle-ac-own", "oracle on ac-auto's inliers' points and A"),
     ("ac-auto", "affcorr's default on the ACs"),
     ("pts-auto", "affcorr's default on the same matches' points"),
+    ("ac-soft", "ac-auto refitted on a soft inlier set (`soft_fit`, with --soft-fit)"),
     ("poselib", "PoseLib on the points"),
 )
 
 
-def run(fams, seeds: int, n: int, peers: bool) -> list[dict]:
+def run(fams, seeds: int, n: int, peers: bool, soft: bool = False) -> list[dict]:
     """One row per (family, seed, method): errors in degrees."""
     jobs = sf.make_jobs(["relpose"], fams, seeds, n)
     over = dict(fams)
@@ -156,6 +228,12 @@ def run(fams, seeds: int, n: int, peers: bool) -> list[dict]:
             if own is not None and own.sum() >= 5
             else (180.0, 180.0)
         )
+        if soft:
+            errs["ac-soft"] = (
+                sf.pose_errors(*soft_fit(sc, ac["R"], ac["t"], own), sc)
+                if own is not None and own.sum() >= 5
+                else (180.0, 180.0)
+            )
         pts, _ = sf.run_affcorr("relpose", sc, jb["thr"], "pts", {})
         errs["pts-auto"] = sf.errors("relpose", pts, sc)
         for name, (e1, e2) in errs.items():
@@ -195,6 +273,7 @@ RATIOS = (
     ("oracle pts+A / oracle pts: the most A can give", "oracle-ac", "oracle-pts"),
     ("ac-auto / oracle pts+A", "ac-auto", "oracle-ac"),
     ("ac-auto / oracle pts+A on its inliers", "ac-auto", "oracle-ac-own"),
+    ("ac-soft / oracle pts+A", "ac-soft", "oracle-ac"),
     ("pts-auto / oracle pts", "pts-auto", "oracle-pts"),
     ("PoseLib / oracle pts", "poselib", "oracle-pts"),
     ("ac-auto / pts-auto", "ac-auto", "pts-auto"),
@@ -262,6 +341,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n", type=int, default=800, help="matches per scene")
     ap.add_argument("--families", nargs="+", default=None, help="names (default: FAMILIES)")
     ap.add_argument("--no-peers", action="store_true", help="leave PoseLib out")
+    ap.add_argument(
+        "--soft-fit",
+        action="store_true",
+        help="add ac-soft: ac-auto refitted on a soft inlier set (a probe, docs/estimation.md)",
+    )
     ap.add_argument("--out", default=str(common.RESULTS / "pose_oracle"))
     args = ap.parse_args(argv)
     known = dict(sf.FAMILIES + sf.EXTRA_FAMILIES)
@@ -271,7 +355,7 @@ def main(argv: list[str] | None = None) -> int:
         ap.error(f"--families: unknown {unknown}; known {list(known)}")
     fams = [(f, known[f]) for f in names]
     t0 = time.time()
-    rows = run(fams, args.seeds, args.n, not args.no_peers)
+    rows = run(fams, args.seeds, args.n, not args.no_peers, args.soft_fit)
     common.write_csv(rows, f"{args.out}.csv")
     common.write_report(f"{args.out}.md", report(rows, fams, args, time.time() - t0))
     return 0
