@@ -223,15 +223,17 @@ def run(fams, seeds: int, n: int, peers: bool, soft: bool = False) -> list[dict]
         ac, _ = sf.run_affcorr("relpose", sc, jb["thr"], "ac", {})
         errs["ac-auto"] = sf.errors("relpose", ac, sc)
         own = None if ac is None else ac["inliers"]
+        # The fits on ac-auto's inliers need 5 of them; short of that they fail (180°).
+        on_own = own is not None and own.sum() >= 5
         errs["oracle-ac-own"] = (
             sf.pose_errors(*oracle_fit(sc, own, s["px"], s["aff"], True), sc)
-            if own is not None and own.sum() >= 5
+            if on_own
             else (180.0, 180.0)
         )
         if soft:
             errs["ac-soft"] = (
                 sf.pose_errors(*soft_fit(sc, ac["R"], ac["t"], own), sc)
-                if own is not None and own.sum() >= 5
+                if on_own
                 else (180.0, 180.0)
             )
         pts, _ = sf.run_affcorr("relpose", sc, jb["thr"], "pts", {})
