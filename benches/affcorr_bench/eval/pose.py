@@ -170,14 +170,16 @@ def get_matches(name: str, pair: pose_data.PosePair, cached_only: bool = False) 
     if name == "affcorr":
         # affcorr's matches depend on its pipeline's code too (the view cascade), as the
         # suite's cache keys say (suite._key)
-        tag += f"-p{suite.AFFCORR_PIPELINE_REVISION}-src{suite.pipeline_source_digest()}"
+        tag += suite.pipeline_tag()
     out = dict(np.load(path)) if path.exists() else None
     if out is not None and str(out.get("shape_tag", "")) == tag:
         return out
-    if cached_only and (out is None or name == "affcorr"):
-        return None  # affcorr's matches are its ACs: a stale one would mean matching again
+    # affcorr's matches are its ACs: a stale one means matching again, as a missing one does
+    rematch = out is None or name == "affcorr"
+    if cached_only and rematch:
+        return None
     img1, img2 = pair.load()
-    if out is None or name == "affcorr":  # affcorr's matches are its ACs: run it again
+    if rematch:
         m = matchers.run(name, img1, img2, max_keypoints=MAX_KEYPOINTS)
         out = dict(x1=m.x1, x2=m.x2, score=m.score, seconds=np.float64(m.seconds))
         if m.A is not None:

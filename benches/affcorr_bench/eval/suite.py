@@ -75,16 +75,19 @@ def pipeline_source_digest() -> str:
     return h.hexdigest()[:10]
 
 
+def pipeline_tag() -> str:
+    """The part of affcorr's cache keys that names its pipeline: the revision and the source
+    digest (``-p<revision>-src<digest>``)."""
+    return f"-p{AFFCORR_PIPELINE_REVISION}-src{pipeline_source_digest()}"
+
+
 def _key(pair, name: str, max_keypoints: int) -> Path:
     h = hashlib.sha1(pair.img1.tobytes() + pair.img2.tobytes()).hexdigest()[:10]
     folder = CACHE / "matches" / f"v{MATCHES_VERSION}" / f"{pair.id}-{h}"
     # affcorr's matches depend on its shape model and on its pipeline's code too.
     tag = ""
     if name == "affcorr":
-        tag = (
-            f"-shape{matchers.shape_model_tag()}-p{AFFCORR_PIPELINE_REVISION}"
-            f"-src{pipeline_source_digest()}"
-        )
+        tag = f"-shape{matchers.shape_model_tag()}{pipeline_tag()}"
     return folder / f"{name}-k{max_keypoints}{tag}.npz"
 
 
