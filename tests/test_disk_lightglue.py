@@ -156,3 +156,23 @@ def test_the_cli_takes_the_matcher(capsys):
     # measured: 318 of 479 inliers, mean corner error 1.3 px
     err = float(out.split("mean corner error vs ground truth:")[1].split()[0])
     assert err < 3.0, out
+
+
+def test_the_view_cascade_screens_with_xfeat(tmp_path):
+    """DISK's extractions cost 10-30x XFeat's: with the cascade on, XFeat's backbone screens the
+    synthetic views (and is among the models); without the cascade it is not loaded, and a models
+    directory without it leaves the screen to DISK's own features."""
+    import shutil
+
+    import affcorr
+
+    p = affcorr.Pipeline("disk-lightglue", max_keypoints=TOP_K)
+    assert p.view_screen == "xfeat"
+    assert p.models["backbone"] == bundled_models_dir() / "xfeat_backbone.onnx"
+    off = affcorr.Pipeline("disk-lightglue", max_keypoints=TOP_K, views="off")
+    assert off.view_screen == "disk-lightglue" and "backbone" not in off.models
+    for f in bundled_models_dir().glob("disk_*.onnx"):
+        shutil.copy(f, tmp_path / f.name)
+    alone = affcorr.Pipeline("disk-lightglue", max_keypoints=TOP_K, models_dir=tmp_path)
+    assert alone.view_screen == "disk-lightglue" and "backbone" not in alone.models
+    assert affcorr.Pipeline().view_screen == "xfeat-lighterglue"

@@ -68,6 +68,18 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
         needs.set_item(matcher.name(), roles)?;
     }
     m.add("PIPELINE_MATCHER_MODELS", needs)?;
+    // The models of the view cascade's screen where another matcher screens (XFeat's backbone
+    // for DISK and ALIKED), loaded when the cascade is on.
+    let screen = PyDict::new(py);
+    for matcher in Matcher::ALL {
+        let roles: Vec<&str> = defaults::view_screen(matcher)
+            .map_or(&[][..], Matcher::models)
+            .iter()
+            .map(|r| r.name())
+            .collect();
+        screen.set_item(matcher.name(), roles)?;
+    }
+    m.add("PIPELINE_SCREEN_MODELS", screen)?;
     let files = PyDict::new(py);
     for role in affcorr::pipeline::ModelRole::ALL {
         files.set_item(role.name(), model_file(role))?;
@@ -623,6 +635,13 @@ impl PipelineRunner {
     #[getter]
     fn views(&self) -> &'static str {
         self.inner.views().mode.name()
+    }
+
+    /// The matcher whose features screen the view cascade's groups: "xfeat" for DISK and
+    /// ALIKED (when XFeat's backbone was given), else the pipeline's own.
+    #[getter]
+    fn view_screen(&self) -> &'static str {
+        self.inner.view_screen().name()
     }
 
     /// The matcher model's custom metadata: the XFeat, DISK or ALIKED backbone's, or the dense

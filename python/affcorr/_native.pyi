@@ -366,6 +366,9 @@ PIPELINE_DEFAULTS: dict[str, Any]
 PIPELINE_MATCHERS: list[str]
 #: The model roles each matcher runs.
 PIPELINE_MATCHER_MODELS: dict[str, list[str]]
+#: The model roles of the view cascade's screen where another matcher screens (XFeat's
+#: backbone for DISK and ALIKED), by matcher.
+PIPELINE_SCREEN_MODELS: dict[str, list[str]]
 #: Model file names in a models directory, by role.
 PIPELINE_MODEL_FILES: dict[str, str]
 
@@ -463,6 +466,8 @@ class PipelineRunner:
     def matcher(self) -> str: ...
     @property
     def views(self) -> str: ...
+    @property
+    def view_screen(self) -> str: ...
     @property
     def max_keypoints(self) -> int: ...
     @property

@@ -89,6 +89,7 @@ ImageLike = Union[str, "os.PathLike[str]", np.ndarray]
 #: Model file names in a models directory, by role, and the roles each matcher needs.
 _FILES: dict[str, str] = dict(_native.PIPELINE_MODEL_FILES)
 _NEEDS: dict[str, list[str]] = {k: list(v) for k, v in _native.PIPELINE_MATCHER_MODELS.items()}
+_SCREEN: dict[str, list[str]] = {k: list(v) for k, v in _native.PIPELINE_SCREEN_MODELS.items()}
 
 _D = PIPELINE_DEFAULTS
 
@@ -324,6 +325,10 @@ class Pipeline:
                 "models_dir"
             )
         needs = _NEEDS[matcher]
+        # The view cascade's screen (XFeat's backbone for DISK and ALIKED) where its model is
+        # there; without it the matcher's own features screen the views, slower.
+        if views != "off":
+            needs = needs + [k for k in _SCREEN.get(matcher, []) if paths[k].is_file()]
         self._models = {**{k: paths[k] for k in needs}, "shape": shape}
         model_args = {f"{k}_model": str(paths[k]) for k in needs}
         args = dict(
@@ -384,6 +389,14 @@ class Pipeline:
         return self._runner.views
 
     @property
+    def view_screen(self) -> str:
+        """The matcher whose features rank the view cascade's synthetic views before any is
+        matched: ``"xfeat"`` for ``"disk-lightglue"`` and ``"aliked-lightglue"`` (whose own
+        extractions cost 10–30× XFeat's; docs/pipeline.md, "Screening with XFeat"), else the
+        pipeline's own matcher."""
+        return self._runner.view_screen
+
+    @property
     def matcher_metadata(self) -> dict[str, str]:
         """The matcher model's custom ONNX metadata (the XFeat backbone's or the dense
         matcher's), e.g. ``affcorr.contract``."""
@@ -407,7 +420,8 @@ class Pipeline:
     @property
     def models(self) -> dict[str, Path]:
         """The model files in use (``backbone``, ``refine`` / ``lighterglue``, or ``dense``;
-        ``shape``)."""
+        the DISK or ALIKED matcher's, with XFeat's ``backbone`` for the view cascade's screen
+        when the cascade is on; ``shape``)."""
         return dict(self._models)
 
     @property

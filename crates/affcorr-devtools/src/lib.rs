@@ -120,3 +120,21 @@ pub fn dense_test_model(name: &str, args: &[&str]) -> PathBuf {
     }
     out
 }
+
+/// Whether the models exported at setup time (`benches/eval/setup.sh`, not committed) are in
+/// the models directory: `file` is one of them. Missing: a note on stderr and `false`, or a
+/// failure under `AFFCORR_REQUIRE_EXPORTED_MODELS=1` (scripts/test.sh), naming `command`.
+pub fn exported(file: &str, what: &str, command: &str) -> bool {
+    let dir = models_dir();
+    if dir.join(file).is_file() {
+        return true;
+    }
+    let required = std::env::var("AFFCORR_REQUIRE_EXPORTED_MODELS").is_ok_and(|v| v == "1");
+    assert!(
+        !required,
+        "the {what} models are missing from {}: run `{command}`",
+        dir.display()
+    );
+    eprintln!("note: {what} not exported ({command}); its tests not run");
+    false
+}

@@ -12,7 +12,7 @@ use crate::defaults;
 use crate::error::{PipelineError, Result};
 use crate::grow::GrowOptions;
 use crate::pipeline::Pipeline;
-use crate::views::ViewOptions;
+use crate::views::{ViewMode, ViewOptions};
 
 /// The XFeat backbone's file name in a models directory ([`PipelineBuilder::models_dir`]).
 pub const BACKBONE_FILE: &str = "xfeat_backbone.onnx";
@@ -301,6 +301,41 @@ impl PipelineBuilder {
         self.path(explicit, model_file(role), what)
     }
 
+    /// The matcher whose features screen the view cascade's groups in place of the pipeline's
+    /// own ([`defaults::view_screen`]), at the same keypoint budget: loaded when the cascade is
+    /// on and the matcher is a slow one. Its model (XFeat's backbone) is looked up like the
+    /// matcher's ([`Self::backbone_model`] or [`Self::models_dir`]); where there is none, the
+    /// cascade screens with the matcher's own features (the same views, slower), and says so
+    /// in the log.
+    fn load_screener(&self, max_keypoints: usize, threads: usize) -> Result<Option<PointMatcher>> {
+        let Some(kind) = defaults::view_screen(self.matcher) else {
+            return Ok(None);
+        };
+        if self.views.mode == ViewMode::Off {
+            return Ok(None);
+        }
+        let mut files = MatcherFiles::default();
+        for &role in kind.models() {
+            let path = self.role_path(role).ok().filter(|p| p.is_file());
+            let Some(path) = path else {
+                tracing::warn!(
+                    model = model_file(role),
+                    "no {} model for the view cascade's screen: the {} matcher's own features \
+                     screen the views",
+                    kind,
+                    self.matcher
+                );
+                return Ok(None);
+            };
+            files.set(role, path);
+        }
+        let mut screener = PointMatcher::load(kind, &files, Some(max_keypoints), 0, threads)?;
+        if let Some(t) = defaults::detection_threshold(kind) {
+            screener.set_detection_threshold(t)?;
+        }
+        Ok(Some(screener))
+    }
+
     /// Loads and checks the models the matcher needs, and the shape network.
     pub fn build(self) -> Result<Pipeline> {
         let config = self.clone();
@@ -328,17 +363,7 @@ impl PipelineBuilder {
         let threads = affcorr_runner::resolve_threads(self.threads)?;
         let mut files = MatcherFiles::default();
         for &role in self.matcher.models() {
-            let path = Some(self.role_path(role)?);
-            match role {
-                ModelRole::Backbone => files.backbone = path,
-                ModelRole::Refine => files.refine = path,
-                ModelRole::LighterGlue => files.lighterglue = path,
-                ModelRole::Dense => files.dense = path,
-                ModelRole::DiskBackbone => files.disk_backbone = path,
-                ModelRole::DiskLightGlue => files.disk_lightglue = path,
-                ModelRole::AlikedBackbone => files.aliked_backbone = path,
-                ModelRole::AlikedLightGlue => files.aliked_lightglue = path,
-            }
+            files.set(role, self.role_path(role)?);
         }
         // A dense matcher draws `max_matches` and keeps them all.
         let (max_keypoints, max_matches) = match self.matcher {
@@ -364,6 +389,7 @@ impl PipelineBuilder {
         {
             matcher.set_detection_threshold(t)?;
         }
+        let screener = self.load_screener(max_keypoints, threads)?;
         let shape = ShapeEstimator::load(
             self.path(&self.shape, SHAPE_FILE, "shape_model")?,
             &ShapeModelOptions {
@@ -380,6 +406,7 @@ impl PipelineBuilder {
             })?;
         Ok(Pipeline {
             matcher,
+            screener,
             shape,
             affine_refinement: self.affine_refinement.clone(),
             drop_unreliable: self.drop_unreliable,

@@ -59,6 +59,20 @@ pub const ALIKED_LIGHTGLUE_RIVAL_CERTAINTY: f64 = 0.3;
 /// [`rival_certainty`] of DISK + LightGlue.
 pub const DISK_LIGHTGLUE_RIVAL_CERTAINTY: f64 = 0.35;
 
+/// The matcher whose features screen the view cascade's groups ([`crate::views::screen`]) when
+/// it is not the pipeline's own: XFeat's keypoints (mutual nearest neighbours) for DISK +
+/// LightGlue and ALIKED + LightGlue. Their extractions cost 10–30× XFeat's, and a screened group
+/// extracts every warped image of it (seven rotations of B) where only the views that run need
+/// the matcher's features; XFeat ranks the rotations as the slow matchers' own matching does
+/// (docs/pipeline.md, "Screening with XFeat"). `None`: the matcher's own features (the XFeat
+/// matchers; XFeat* and dense matchers have no descriptors to screen with and rank no view).
+pub fn view_screen(matcher: Matcher) -> Option<Matcher> {
+    match matcher {
+        Matcher::DiskLightGlue | Matcher::AlikedLightGlue => Some(Matcher::XFeatMnn),
+        _ => None,
+    }
+}
+
 /// Matches a dense matcher draws when `max_matches` is not set. DKM draws 10 000; each costs a
 /// shape-network evaluation and a refinement, so fewer by default.
 pub const DENSE_MATCHES: usize = 2000;

@@ -1,6 +1,6 @@
 //! [`Pipeline`]: the stages in order (see the crate docs), one pair or many.
 
-use std::collections::{HashMap, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 use std::rc::Rc;
 use std::sync::OnceLock;
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -86,6 +86,9 @@ fn check_working_size(original: &GrayImage, work: &GrayImage, what: &'static str
 #[derive(Debug)]
 pub struct Pipeline {
     pub(crate) matcher: PointMatcher,
+    /// The matcher whose features screen the view cascade's groups, when not `matcher`
+    /// ([`crate::defaults::view_screen`]).
+    pub(crate) screener: Option<PointMatcher>,
     pub(crate) shape: ShapeEstimator,
     pub(crate) affine_refinement: Option<AffineRefineOptions>,
     pub(crate) drop_unreliable: bool,
@@ -197,6 +200,15 @@ impl Pipeline {
     /// The view cascade's options.
     pub fn views(&self) -> &ViewOptions {
         &self.views
+    }
+
+    /// The matcher whose features screen the view cascade's groups ([`crate::views::screen`]):
+    /// XFeat's for DISK and ALIKED when its backbone was found
+    /// ([`crate::defaults::view_screen`]), else the pipeline's own.
+    pub fn view_screen(&self) -> Matcher {
+        self.screener
+            .as_ref()
+            .map_or(self.matcher.kind(), PointMatcher::kind)
     }
 
     /// Whether unreliable ACs are dropped ([`PipelineBuilder::drop_unreliable`]).
@@ -588,47 +600,31 @@ impl Pipeline {
         Ok(work)
     }
 
-    /// The features of both sides of a view with `warps` (A's, B's): the plain pass's for a
-    /// side the view leaves as it is, else those of its warp, extracted once per pair
-    /// (`store`); `None` when a warp is too small for the matcher. An extraction here is timed
-    /// into `timings` and charged to the store's meter once; the matching of a view subtracts
-    /// its features' extraction times.
+    /// The matcher's features of both sides of a view with `warps` (A's, B's): the plain
+    /// pass's for a side the view leaves as it is, else those of its warp, extracted once per
+    /// pair (`store`); `None` when a warp is too small for the matcher. An extraction here is
+    /// timed into `timings`; the matching of a view subtracts its features' extraction times.
     fn view_features(
         &self,
         store: &mut ViewFeatures<'_>,
-        [a, b]: &[Option<(AffineWarp, usize, usize)>; 2],
+        warps: &[Option<(AffineWarp, usize, usize)>; 2],
         timings: &mut Timings,
     ) -> Result<Option<[Rc<ImageFeatures>; 2]>> {
-        let fa = self.side_features(store, 0, a, timings)?;
-        let fb = self.side_features(store, 1, b, timings)?;
-        Ok(fa.zip(fb).map(|(fa, fb)| [fa, fb]))
+        store.pair(&self.matcher, false, warps, timings)
     }
 
-    /// One side of [`Self::view_features`]: image `image` (0: A, 1: B) under `warp`.
-    fn side_features(
+    /// The features that screen a view ([`crate::views::screen`]): the screener's where the
+    /// pipeline has one, else the matcher's ([`Self::view_features`]).
+    fn screen_features(
         &self,
         store: &mut ViewFeatures<'_>,
-        image: usize,
-        warp: &Option<(AffineWarp, usize, usize)>,
+        warps: &[Option<(AffineWarp, usize, usize)>; 2],
         timings: &mut Timings,
-    ) -> Result<Option<Rc<ImageFeatures>>> {
-        let (Some((w, vw, vh)), Some(key)) = (warp, warp_key(image, warp)) else {
-            return Ok(Some(store.plain[image].clone()));
-        };
-        if let Some(hit) = store.cache.get(&key) {
-            return Ok(Some(hit.clone()));
+    ) -> Result<Option<[Rc<ImageFeatures>; 2]>> {
+        match &self.screener {
+            Some(screener) => store.pair(screener, true, warps, timings),
+            None => self.view_features(store, warps, timings),
         }
-        if (*vw).min(*vh) < 32 {
-            return Ok(None);
-        }
-        let view = warp_image(store.images[image], w, *vw, *vh)?;
-        let f = Rc::new(self.matcher.extract(&view, None)?);
-        store.meter.extraction(vw * vh);
-        timings.decode += f.timings.preprocess;
-        timings.matcher += f.timings.network;
-        timings.detection += f.timings.detection;
-        store.cache.insert(key, f.clone());
-        Ok(Some(f))
     }
 
     /// Patches, shape network and refinement on the matches `raw` of two images (the working
@@ -804,8 +800,15 @@ impl Pipeline {
         // of the other image): each warped image's features are extracted once per pair.
         let mut store = ViewFeatures {
             images: [work_a, work_b],
-            plain: [Rc::new(features_a.clone()), Rc::new(features_b.clone())],
-            cache: HashMap::new(),
+            matcher: FeatureStore {
+                plain: [
+                    Some(Rc::new(features_a.clone())),
+                    Some(Rc::new(features_b.clone())),
+                ],
+                warped: HashMap::new(),
+            },
+            screen: FeatureStore::default(),
+            charged: HashSet::new(),
             meter,
         };
         // The time a group's screen took, counted in the first view it runs.
@@ -825,7 +828,8 @@ impl Pipeline {
                         let mut scored = Vec::with_capacity(group.len());
                         for v in group {
                             let warps = v.warps(sizes.0, sizes.1);
-                            let Some([fa, fb]) = self.view_features(&mut store, &warps, timings)?
+                            let Some([fa, fb]) =
+                                self.screen_features(&mut store, &warps, timings)?
                             else {
                                 continue;
                             };
@@ -988,14 +992,95 @@ impl Pipeline {
     }
 }
 
-/// The features of a pair's synthetic views: the working images and their plain features, the
-/// warped images' features (each extracted once per pair) and the cascade's work meter that
-/// the extractions are charged to.
+/// The features of a pair's synthetic views: the working images, the matcher's features and
+/// the screener's (each image extracted once per pair by each), and the cascade's work meter
+/// that the extractions are charged to.
 struct ViewFeatures<'a> {
     images: [&'a GrayImage; 2],
-    plain: [Rc<ImageFeatures>; 2],
-    cache: HashMap<WarpKey, Rc<ImageFeatures>>,
+    matcher: FeatureStore,
+    /// The screener's, when the pipeline has one ([`Pipeline::screener`]).
+    screen: FeatureStore,
+    /// The warped images whose extraction the meter has counted. Each counts once, whichever
+    /// extractor comes first: the meter counts the default matcher's work (see
+    /// `views::WorkMeter`), and a screener's extraction is a small part of a slow matcher's.
+    charged: HashSet<WarpKey>,
     meter: WorkMeter,
+}
+
+/// One extractor's features of a pair's images: of the working images (`None` until
+/// extracted) and of their warps.
+#[derive(Default)]
+struct FeatureStore {
+    plain: [Option<Rc<ImageFeatures>>; 2],
+    warped: HashMap<WarpKey, Rc<ImageFeatures>>,
+}
+
+impl ViewFeatures<'_> {
+    /// `extractor`'s features of both sides of a view with `warps` ([`Self::side`]).
+    fn pair(
+        &mut self,
+        extractor: &PointMatcher,
+        screen: bool,
+        [a, b]: &[Option<(AffineWarp, usize, usize)>; 2],
+        timings: &mut Timings,
+    ) -> Result<Option<[Rc<ImageFeatures>; 2]>> {
+        let fa = self.side(extractor, screen, 0, a, timings)?;
+        let fb = self.side(extractor, screen, 1, b, timings)?;
+        Ok(fa.zip(fb).map(|(fa, fb)| [fa, fb]))
+    }
+
+    /// `extractor`'s features (the screener's store when `screen`) of image `image` (0: A,
+    /// 1: B) under `warp`, extracted on first use; `None` when the warp is too small for the
+    /// matcher. A warped image's first extraction is charged to the meter; the screener's
+    /// features of a working image are not (the plain pass's extractions were).
+    fn side(
+        &mut self,
+        extractor: &PointMatcher,
+        screen: bool,
+        image: usize,
+        warp: &Option<(AffineWarp, usize, usize)>,
+        timings: &mut Timings,
+    ) -> Result<Option<Rc<ImageFeatures>>> {
+        let store = if screen {
+            &mut self.screen
+        } else {
+            &mut self.matcher
+        };
+        let (Some((w, vw, vh)), Some(key)) = (warp, warp_key(image, warp)) else {
+            if let Some(f) = &store.plain[image] {
+                return Ok(Some(f.clone()));
+            }
+            let f = Rc::new(extract_timed(extractor, self.images[image], timings)?);
+            store.plain[image] = Some(f.clone());
+            return Ok(Some(f));
+        };
+        if let Some(hit) = store.warped.get(&key) {
+            return Ok(Some(hit.clone()));
+        }
+        if (*vw).min(*vh) < 32 {
+            return Ok(None);
+        }
+        let view = warp_image(self.images[image], w, *vw, *vh)?;
+        let f = Rc::new(extract_timed(extractor, &view, timings)?);
+        if self.charged.insert(key) {
+            self.meter.extraction(vw * vh);
+        }
+        store.warped.insert(key, f.clone());
+        Ok(Some(f))
+    }
+}
+
+/// `extractor`'s features of `image`, their stages timed into `timings`.
+fn extract_timed(
+    extractor: &PointMatcher,
+    image: &GrayImage,
+    timings: &mut Timings,
+) -> Result<ImageFeatures> {
+    let f = extractor.extract(image, None)?;
+    timings.decode += f.timings.preprocess;
+    timings.matcher += f.timings.network;
+    timings.detection += f.timings.detection;
+    Ok(f)
 }
 
 /// The features of the images of a batch ([`Pipeline::match_pairs`]), each extracted once

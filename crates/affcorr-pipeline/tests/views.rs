@@ -11,7 +11,9 @@ mod common;
 
 use affcorr_geom::{Mat3, Vec3};
 use affcorr_image::{AffineWarp, GrayImage, warp_image};
-use affcorr_pipeline::{Geometry, Pipeline, ViewMode, ViewSpec};
+use affcorr_pipeline::views::screen;
+use affcorr_pipeline::{Geometry, Matcher, Pipeline, ViewMode, ViewOptions, ViewSpec};
+use affcorr_runner::{MatcherFiles, PointMatcher};
 
 fn graffiti() -> (GrayImage, GrayImage, Mat3) {
     let dir = common::root().join("data/graffiti");
@@ -199,4 +201,107 @@ fn a_6x_zoom_of_image_b_off_centre_is_solved() {
     let p = pipeline(ViewMode::Auto);
     // B′'s pixels are a sixth of B's: 10 px in B′ is under 2 px in B.
     check_with(&p, &a, &b_zoom, &gt, "B zoomed 6x off-centre", 10.0);
+}
+
+/// A DISK + LightGlue pipeline with the default cascade, built from the models directory, or
+/// `None` when DISK's models are not exported (see `affcorr_devtools::exported`).
+fn disk_pipeline(mode: ViewMode) -> Option<Pipeline> {
+    common::init();
+    if !affcorr_devtools::exported(
+        "disk_lightglue_layer.onnx",
+        "DISK + LightGlue",
+        affcorr_runner::disk::EXPORT_COMMAND,
+    ) {
+        return None;
+    }
+    let p = Pipeline::builder()
+        .matcher(Matcher::DiskLightGlue)
+        .max_keypoints(1024)
+        .models_dir(common::models_dir())
+        .threads(2)
+        .views(ViewOptions {
+            mode,
+            ..Default::default()
+        })
+        .build()
+        .unwrap();
+    Some(p)
+}
+
+#[test]
+fn a_slow_matcher_screens_its_views_with_xfeat_and_still_solves_the_rotated_pair() {
+    let Some(p) = disk_pipeline(ViewMode::Auto) else {
+        return;
+    };
+    assert_eq!(p.view_screen(), Matcher::XFeatMnn);
+    let (a, b, h) = graffiti();
+    let (w, vw, vh) =
+        AffineWarp::linear(135f64.to_radians(), 1.0, 1.0, 0.0).fitted(b.width(), b.height());
+    let b_rot = warp_image(&b, &w, vw, vh).unwrap();
+    check_with(
+        &p,
+        &a,
+        &b_rot,
+        &(warp_matrix(&w) * h),
+        "DISK, B rotated 135°",
+        5.0,
+    );
+
+    // The reported screen of every rotated view is XFeat's: mutual nearest neighbours of
+    // XFeat's keypoints in A and in the view of B, and a homography's inliers among them.
+    let m = p.match_pair(&a, &b_rot).unwrap();
+    let xfeat = PointMatcher::load(
+        Matcher::XFeatMnn,
+        &MatcherFiles {
+            backbone: Some(common::models_dir().join("xfeat_backbone.onnx")),
+            ..Default::default()
+        },
+        Some(1024),
+        0,
+        2,
+    )
+    .unwrap();
+    let fa = xfeat.extract(&a, None).unwrap();
+    let screened: Vec<_> = m.views.iter().filter(|v| v.screen.is_some()).collect();
+    assert!(!screened.is_empty(), "{:?}", m.views);
+    for v in screened {
+        let [None, Some((warp, vw, vh))] = v.view.warps((a.width(), a.height()), (vw, vh)) else {
+            panic!("a rotated view warps B only: {:?}", v.view);
+        };
+        let fb = xfeat
+            .extract(&warp_image(&b_rot, &warp, vw, vh).unwrap(), None)
+            .unwrap();
+        assert_eq!(
+            v.screen,
+            Some(screen(&fa, &fb).unwrap()),
+            "{}",
+            v.view.label()
+        );
+    }
+}
+
+#[test]
+fn without_the_cascade_or_xfeats_model_a_slow_matcher_screens_with_its_own_features() {
+    let Some(off) = disk_pipeline(ViewMode::Off) else {
+        return;
+    };
+    assert_eq!(off.view_screen(), Matcher::DiskLightGlue);
+    // DISK's models alone (no models directory, so no XFeat backbone): built, and screening
+    // with DISK's descriptors.
+    let dir = common::models_dir();
+    let p = Pipeline::builder()
+        .matcher(Matcher::DiskLightGlue)
+        .disk_backbone_model(dir.join("disk_backbone.onnx"))
+        .disk_lightglue_model(dir.join("disk_lightglue.onnx"))
+        .shape_model(common::bundled_model())
+        .threads(1)
+        .build()
+        .unwrap();
+    assert_eq!(p.views().mode, ViewMode::Auto);
+    assert_eq!(p.view_screen(), Matcher::DiskLightGlue);
+    // The default XFeat pipeline screens with its own features.
+    assert_eq!(
+        pipeline(ViewMode::Auto).view_screen(),
+        Matcher::XFeatLighterGlue
+    );
 }

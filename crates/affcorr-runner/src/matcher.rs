@@ -212,6 +212,21 @@ impl MatcherFiles {
             ModelRole::AlikedLightGlue => self.aliked_lightglue.as_ref(),
         }
     }
+
+    /// Sets the file of `role`.
+    pub fn set(&mut self, role: ModelRole, path: PathBuf) {
+        let slot = match role {
+            ModelRole::Backbone => &mut self.backbone,
+            ModelRole::Refine => &mut self.refine,
+            ModelRole::LighterGlue => &mut self.lighterglue,
+            ModelRole::Dense => &mut self.dense,
+            ModelRole::DiskBackbone => &mut self.disk_backbone,
+            ModelRole::DiskLightGlue => &mut self.disk_lightglue,
+            ModelRole::AlikedBackbone => &mut self.aliked_backbone,
+            ModelRole::AlikedLightGlue => &mut self.aliked_lightglue,
+        };
+        *slot = Some(path);
+    }
 }
 
 /// Wall time of a matcher's stages on one pair.
