@@ -58,6 +58,20 @@ def test_an_easy_pair_tries_no_synthetic_view():
     assert off.views == [] and off.view is None
 
 
+def test_xfeat_star_ranks_its_views_by_xfeat_keypoints(upside_down):
+    """XFeat*'s semi-dense cells have no keypoint descriptors: XFeat's keypoints screen its
+    views (every view screened 0 before), and the best-screened rotation solves the pair."""
+    p = affcorr.Pipeline("xfeat-star", threads=2)
+    assert p.view_screen == "xfeat" and "backbone" in p.models
+    assert affcorr.Pipeline("xfeat-star", views="off").view_screen == "xfeat-star"
+    a, b, gt = upside_down
+    H, _, res = p.homography(a, b, return_matches=True)
+    screened = [v for v in res.views if v["screen"] is not None]
+    best = max(screened, key=lambda v: v["screen"])
+    assert best["screen"] > 0 and best["used"] and best["label"] == "B rot 180°", res.views
+    assert corner_error(H, gt, *a.shape[::-1]) < 3
+
+
 @pytest.mark.parametrize(
     ("kwargs", "fragment"),
     [

@@ -69,7 +69,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     }
     m.add("PIPELINE_MATCHER_MODELS", needs)?;
     // The models of the view cascade's screen where another matcher screens (XFeat's backbone
-    // for DISK and ALIKED), loaded when the cascade is on.
+    // for DISK, ALIKED and XFeat*), loaded when the cascade is on.
     let screen = PyDict::new(py);
     for matcher in Matcher::ALL {
         let roles: Vec<&str> = defaults::view_screen(matcher)
@@ -637,8 +637,8 @@ impl PipelineRunner {
         self.inner.views().mode.name()
     }
 
-    /// The matcher whose features screen the view cascade's groups: "xfeat" for DISK and
-    /// ALIKED (when XFeat's backbone was given), else the pipeline's own.
+    /// The matcher whose features screen the view cascade's groups: "xfeat" for DISK, ALIKED
+    /// (when XFeat's backbone was given) and XFeat*, else the pipeline's own.
     #[getter]
     fn view_screen(&self) -> &'static str {
         self.inner.view_screen().name()

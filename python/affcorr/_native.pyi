@@ -367,7 +367,7 @@ PIPELINE_MATCHERS: list[str]
 #: The model roles each matcher runs.
 PIPELINE_MATCHER_MODELS: dict[str, list[str]]
 #: The model roles of the view cascade's screen where another matcher screens (XFeat's
-#: backbone for DISK and ALIKED), by matcher.
+#: backbone for DISK, ALIKED and XFeat*), by matcher.
 PIPELINE_SCREEN_MODELS: dict[str, list[str]]
 #: Model file names in a models directory, by role.
 PIPELINE_MODEL_FILES: dict[str, str]

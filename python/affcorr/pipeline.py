@@ -325,10 +325,11 @@ class Pipeline:
                 "models_dir"
             )
         needs = _NEEDS[matcher]
-        # The view cascade's screen (XFeat's backbone for DISK and ALIKED) where its model is
-        # there; without it the matcher's own features screen the views, slower.
+        # The view cascade's screen (XFeat's backbone for DISK, ALIKED and XFeat*) where its
+        # model is there; without it the matcher's own features screen the views.
         if views != "off":
-            needs = needs + [k for k in _SCREEN.get(matcher, []) if paths[k].is_file()]
+            screen = _SCREEN.get(matcher, [])
+            needs = needs + [k for k in screen if k not in needs and paths[k].is_file()]
         self._models = {**{k: paths[k] for k in needs}, "shape": shape}
         model_args = {f"{k}_model": str(paths[k]) for k in needs}
         args = dict(
@@ -392,7 +393,8 @@ class Pipeline:
     def view_screen(self) -> str:
         """The matcher whose features rank the view cascade's synthetic views before any is
         matched: ``"xfeat"`` for ``"disk-lightglue"`` and ``"aliked-lightglue"`` (whose own
-        extractions cost 10–30× XFeat's; docs/pipeline.md, "Screening with XFeat"), else the
+        extractions cost 10–30× XFeat's) and for ``"xfeat-star"`` (whose semi-dense cells have
+        no keypoint descriptors; docs/pipeline.md, "Screening with XFeat"), else the
         pipeline's own matcher."""
         return self._runner.view_screen
 

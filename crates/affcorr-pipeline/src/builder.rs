@@ -303,10 +303,9 @@ impl PipelineBuilder {
 
     /// The matcher whose features screen the view cascade's groups in place of the pipeline's
     /// own ([`defaults::view_screen`]), at the same keypoint budget: loaded when the cascade is
-    /// on and the matcher is a slow one. Its model (XFeat's backbone) is looked up like the
+    /// on and `view_screen` names one. Its model (XFeat's backbone) is looked up like the
     /// matcher's ([`Self::backbone_model`] or [`Self::models_dir`]); where there is none, the
-    /// cascade screens with the matcher's own features (the same views, slower), and says so
-    /// in the log.
+    /// cascade screens with the matcher's own features, and says so in the log.
     fn load_screener(&self, max_keypoints: usize, threads: usize) -> Result<Option<PointMatcher>> {
         let Some(kind) = defaults::view_screen(self.matcher) else {
             return Ok(None);

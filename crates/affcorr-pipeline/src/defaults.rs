@@ -61,14 +61,17 @@ pub const DISK_LIGHTGLUE_RIVAL_CERTAINTY: f64 = 0.35;
 
 /// The matcher whose features screen the view cascade's groups ([`crate::views::screen`]) when
 /// it is not the pipeline's own: XFeat's keypoints (mutual nearest neighbours) for DISK +
-/// LightGlue and ALIKED + LightGlue. Their extractions cost 10–30× XFeat's, and a screened group
-/// extracts every warped image of it (seven rotations of B) where only the views that run need
-/// the matcher's features; XFeat ranks the rotations as the slow matchers' own matching does
-/// (docs/pipeline.md, "Screening with XFeat"). `None`: the matcher's own features (the XFeat
-/// matchers; XFeat* and dense matchers have no descriptors to screen with and rank no view).
+/// LightGlue and ALIKED + LightGlue, and for XFeat*. The slow matchers' extractions cost 10–30×
+/// XFeat's, and a screened group extracts every warped image of it (seven rotations of B) where
+/// only the views that run need the matcher's features. XFeat*'s semi-dense cells have no
+/// keypoint descriptors to screen with: its groups were matched in their order, unranked.
+/// (docs/pipeline.md, "Screening with XFeat".) `None`: the matcher's own features (the sparse
+/// XFeat matchers), or none (a dense matcher, which runs no cascade).
 pub fn view_screen(matcher: Matcher) -> Option<Matcher> {
     match matcher {
-        Matcher::DiskLightGlue | Matcher::AlikedLightGlue => Some(Matcher::XFeatMnn),
+        Matcher::DiskLightGlue | Matcher::AlikedLightGlue | Matcher::XFeatStar => {
+            Some(Matcher::XFeatMnn)
+        }
         _ => None,
     }
 }

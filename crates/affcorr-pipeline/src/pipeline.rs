@@ -203,7 +203,7 @@ impl Pipeline {
     }
 
     /// The matcher whose features screen the view cascade's groups ([`crate::views::screen`]):
-    /// XFeat's for DISK and ALIKED when its backbone was found
+    /// XFeat's for DISK, ALIKED and XFeat* when its backbone was found
     /// ([`crate::defaults::view_screen`]), else the pipeline's own.
     pub fn view_screen(&self) -> Matcher {
         self.screener

@@ -305,3 +305,41 @@ fn without_the_cascade_or_xfeats_model_a_slow_matcher_screens_with_its_own_featu
         Matcher::XFeatLighterGlue
     );
 }
+
+#[test]
+fn xfeat_star_ranks_its_views_by_xfeat_keypoints_and_solves_the_rotated_pair() {
+    common::init();
+    let p = Pipeline::builder()
+        .matcher(Matcher::XFeatStar)
+        .models_dir(common::models_dir())
+        .threads(2)
+        .build()
+        .unwrap();
+    // Its semi-dense cells have no keypoint descriptors: the screen is XFeat's.
+    assert_eq!(p.view_screen(), Matcher::XFeatMnn);
+    let (a, b, h) = graffiti();
+    let (w, vw, vh) =
+        AffineWarp::linear(135f64.to_radians(), 1.0, 1.0, 0.0).fitted(b.width(), b.height());
+    let b_rot = warp_image(&b, &w, vw, vh).unwrap();
+    check_with(
+        &p,
+        &a,
+        &b_rot,
+        &(warp_matrix(&w) * h),
+        "XFeat*, B rotated 135°",
+        5.0,
+    );
+    // A rotation within the matcher's ±45° of the one that undoes B's screens highest, and is
+    // the view that solved it (before, every view screened 0 and B turned by 90° ran first).
+    let m = p.match_pair(&a, &b_rot).unwrap();
+    let best = m
+        .views
+        .iter()
+        .filter(|v| v.screen.is_some())
+        .max_by_key(|v| v.screen)
+        .unwrap();
+    assert!(best.screen > Some(0), "{:?}", m.views);
+    let off_by = (best.view.rotation.to_degrees() - 135.0).abs();
+    assert!(off_by <= 45.0 + 1e-9, "{}", best.view.label());
+    assert!(best.used, "{:?}", m.views);
+}
