@@ -126,18 +126,20 @@ fn a_pair_rotated_by_135_degrees_is_solved_through_a_rotated_view() {
     check_rotated(135.0);
 }
 
-/// [`check`] of graffiti with B rotated by `degrees` about its centre.
-fn check_rotated(degrees: f64) {
+/// Graffiti 1→3 with B rotated by `degrees` about its centre: A, the rotated B and their
+/// homography.
+fn rotated_graffiti(degrees: f64) -> (GrayImage, GrayImage, Mat3) {
     let (a, b, h) = graffiti();
     let (w, vw, vh) =
         AffineWarp::linear(degrees.to_radians(), 1.0, 1.0, 0.0).fitted(b.width(), b.height());
     let b_rot = warp_image(&b, &w, vw, vh).unwrap();
-    check(
-        &a,
-        &b_rot,
-        &(warp_matrix(&w) * h),
-        &format!("B rotated {degrees}°"),
-    );
+    (a, b_rot, warp_matrix(&w) * h)
+}
+
+/// [`check`] of graffiti with B rotated by `degrees` about its centre.
+fn check_rotated(degrees: f64) {
+    let (a, b_rot, gt) = rotated_graffiti(degrees);
+    check(&a, &b_rot, &gt, &format!("B rotated {degrees}°"));
 }
 
 #[test]
@@ -234,18 +236,8 @@ fn a_slow_matcher_screens_its_views_with_xfeat_and_still_solves_the_rotated_pair
         return;
     };
     assert_eq!(p.view_screen(), Matcher::XFeatMnn);
-    let (a, b, h) = graffiti();
-    let (w, vw, vh) =
-        AffineWarp::linear(135f64.to_radians(), 1.0, 1.0, 0.0).fitted(b.width(), b.height());
-    let b_rot = warp_image(&b, &w, vw, vh).unwrap();
-    check_with(
-        &p,
-        &a,
-        &b_rot,
-        &(warp_matrix(&w) * h),
-        "DISK, B rotated 135°",
-        5.0,
-    );
+    let (a, b_rot, gt) = rotated_graffiti(135.0);
+    check_with(&p, &a, &b_rot, &gt, "DISK, B rotated 135°", 5.0);
 
     // The reported screen of every rotated view is XFeat's: mutual nearest neighbours of
     // XFeat's keypoints in A and in the view of B, and a homography's inliers among them.
@@ -265,7 +257,8 @@ fn a_slow_matcher_screens_its_views_with_xfeat_and_still_solves_the_rotated_pair
     let screened: Vec<_> = m.views.iter().filter(|v| v.screen.is_some()).collect();
     assert!(!screened.is_empty(), "{:?}", m.views);
     for v in screened {
-        let [None, Some((warp, vw, vh))] = v.view.warps((a.width(), a.height()), (vw, vh)) else {
+        let sizes = ((a.width(), a.height()), (b_rot.width(), b_rot.height()));
+        let [None, Some((warp, vw, vh))] = v.view.warps(sizes.0, sizes.1) else {
             panic!("a rotated view warps B only: {:?}", v.view);
         };
         let fb = xfeat
@@ -317,18 +310,8 @@ fn xfeat_star_ranks_its_views_by_xfeat_keypoints_and_solves_the_rotated_pair() {
         .unwrap();
     // Its semi-dense cells have no keypoint descriptors: the screen is XFeat's.
     assert_eq!(p.view_screen(), Matcher::XFeatMnn);
-    let (a, b, h) = graffiti();
-    let (w, vw, vh) =
-        AffineWarp::linear(135f64.to_radians(), 1.0, 1.0, 0.0).fitted(b.width(), b.height());
-    let b_rot = warp_image(&b, &w, vw, vh).unwrap();
-    check_with(
-        &p,
-        &a,
-        &b_rot,
-        &(warp_matrix(&w) * h),
-        "XFeat*, B rotated 135°",
-        5.0,
-    );
+    let (a, b_rot, gt) = rotated_graffiti(135.0);
+    check_with(&p, &a, &b_rot, &gt, "XFeat*, B rotated 135°", 5.0);
     // A rotation within the matcher's ±45° of the one that undoes B's screens highest, and is
     // the view that solved it (before, every view screened 0 and B turned by 90° ran first).
     let m = p.match_pair(&a, &b_rot).unwrap();
