@@ -46,7 +46,10 @@
 //!      its warped images once, ranks its views by XFeat's mutual nearest neighbours and a
 //!      homography's inliers (milliseconds, where LighterGlue and the ACs take hundreds),
 //!      matches those clearly above the group's noise ([`screen_run`]) and defers the rest
-//!      until every step has run.
+//!      until every step has run. The screen is XFeat's for every matcher: DISK's and
+//!      ALIKED's groups (whose extractions cost 10–30× XFeat's) and XFeat*'s (whose cells have
+//!      no keypoint descriptors) are screened with XFeat's keypoints, and the matcher
+//!      extracts only the views that run ([`crate::defaults::view_screen`]).
 //!    - a view that verifies with fewer than [`REFINE_BELOW`] × min_inliers, or fewer than
 //!      [`WEAK_YIELD`] of the keypoint budget, is followed by its refinement
 //!      ([`refinement_view`], the view its inliers' map guides); the one with
