@@ -33,8 +33,8 @@ use crate::source::ImageSource;
 use crate::views::{
     CONFIDENT_VIEW, REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec,
     WEAK_RATIO, WorkMeter, cascade_steps, guided_view, planar_rival, planar_support,
-    refinement_view, rival_views, screen, screen_run, uncertain, verified_fundamental, verify,
-    weak_yield,
+    refinement_view, rival_views, rivalled_by_rotations, screen, screen_run, uncertain,
+    verified_fundamental, verify, weak_yield,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -771,7 +771,7 @@ impl Pipeline {
         // by its guide too: a tilt of 70° verifies the plain pass with a few dozen matches
         // in a band of the overlap, and the view that undoes their map finds the plane
         // (benches/results/eval/extreme_varied.md).
-        let rivals_only = rival_floor > 0 && inliers >= CONFIDENT_VIEW * o.min_inliers;
+        let mut rivals_only = rival_floor > 0 && inliers >= CONFIDENT_VIEW * o.min_inliers;
         let mut steps: VecDeque<Step> = if rivals_only {
             VecDeque::from([Step::Screened(rival_views())])
         } else {
@@ -970,7 +970,11 @@ impl Pipeline {
                 }
                 refining = false;
                 if best_inliers >= CONFIDENT_VIEW * o.min_inliers {
-                    break;
+                    if !rivalled_by_rotations(steps.front(), best_inliers, self.max_keypoints()) {
+                        break;
+                    }
+                    steps.truncate(1);
+                    rivals_only = true;
                 }
                 // A weak proof (`views::CONFIDENT_VIEW`): kept, and rivalled by the views left.
                 rival_floor = rival_floor.max((RIVAL_MARGIN * best_inliers as f64).ceil() as usize);

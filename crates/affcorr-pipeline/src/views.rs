@@ -699,6 +699,22 @@ pub fn candidate_views() -> Vec<ViewSpec> {
         .collect()
 }
 
+/// Whether a view kept as verified by `inliers` (at least [`CONFIDENT_VIEW`] × min_inliers)
+/// is still rivalled by the rotated views, the cascade's `next` step, instead of ending the
+/// cascade: it verified before the rotations ran (the view guided by a failed plain pass's
+/// agreeing ACs, or its refinement) and with a [`weak_yield`]. A pattern matched at the wrong
+/// rotation can agree in part and guide to a wrong registration that verifies; the rotations
+/// rival it as they rival a weak plain pass, and nothing after them runs. On views_pose this
+/// took one stereo pair turned by 135° from the wrong guided view to B turned by 135°, and
+/// with XFeat* two (docs/pipeline.md, "Rotated pairs").
+pub(crate) fn rivalled_by_rotations(
+    next: Option<&Step>,
+    inliers: usize,
+    keypoint_budget: usize,
+) -> bool {
+    next == Some(&Step::Screened(rival_views())) && weak_yield(inliers, keypoint_budget)
+}
+
 /// The inlier threshold (px, in the views' pixels) of the screen's homography.
 pub const SCREEN_THRESHOLD: f64 = 5.0;
 
@@ -1106,6 +1122,22 @@ mod tests {
             ..unbounded
         };
         assert!(!timed.within_budget(long, &meter));
+    }
+
+    #[test]
+    fn a_weak_view_verified_before_the_rotations_is_rivalled_by_them() {
+        let rotations = Step::Screened(rival_views());
+        // 30 inliers of a 1024-keypoint budget: weak (under a tenth).
+        assert!(rivalled_by_rotations(Some(&rotations), 30, 1024));
+        // A strong yield ends the cascade.
+        assert!(!rivalled_by_rotations(Some(&rotations), 150, 1024));
+        // After the rotations ran (or for any other next step), nothing rivals it.
+        let zoom = Step::View(ViewSpec::param(ViewImage::A, 0.0, 0.5, 1.0, 0.0));
+        assert!(!rivalled_by_rotations(Some(&zoom), 30, 1024));
+        assert!(!rivalled_by_rotations(None, 30, 1024));
+        // Only the whole group of rotations counts as the rotations.
+        let part = Step::Screened(rival_views()[..3].to_vec());
+        assert!(!rivalled_by_rotations(Some(&part), 30, 1024));
     }
 
     #[test]
