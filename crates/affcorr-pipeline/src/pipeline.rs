@@ -973,6 +973,8 @@ impl Pipeline {
                     if !rivalled_by_rotations(steps.front(), best_inliers, self.max_keypoints()) {
                         break;
                     }
+                    // Verified weakly before the rotations ran: they rival it, and only they
+                    // (their views that do not stand out dropped, as for a weak plain pass).
                     steps.truncate(1);
                     rivals_only = true;
                 }
