@@ -12,7 +12,7 @@ mod common;
 use affcorr_geom::{Mat3, Vec3};
 use affcorr_image::{AffineWarp, GrayImage, warp_image};
 use affcorr_pipeline::views::screen;
-use affcorr_pipeline::{Geometry, Matcher, Pipeline, ViewMode, ViewOptions, ViewSpec};
+use affcorr_pipeline::{Geometry, Matcher, Pipeline, ViewMode, ViewSpec};
 use affcorr_runner::{MatcherFiles, PointMatcher};
 
 fn graffiti() -> (GrayImage, GrayImage, Mat3) {
@@ -205,7 +205,7 @@ fn a_6x_zoom_of_image_b_off_centre_is_solved() {
     check_with(&p, &a, &b_zoom, &gt, "B zoomed 6x off-centre", 10.0);
 }
 
-/// A DISK + LightGlue pipeline with the default cascade, built from the models directory, or
+/// A DISK + LightGlue pipeline with the cascade in `mode`, built from the models directory, or
 /// `None` when DISK's models are not exported (see `affcorr_devtools::exported`).
 fn disk_pipeline(mode: ViewMode) -> Option<Pipeline> {
     common::init();
@@ -216,18 +216,11 @@ fn disk_pipeline(mode: ViewMode) -> Option<Pipeline> {
     ) {
         return None;
     }
-    let p = Pipeline::builder()
-        .matcher(Matcher::DiskLightGlue)
-        .max_keypoints(1024)
-        .models_dir(common::models_dir())
-        .threads(2)
-        .views(ViewOptions {
-            mode,
-            ..Default::default()
-        })
-        .build()
-        .unwrap();
-    Some(p)
+    Some(common::matcher_pipeline(
+        Matcher::DiskLightGlue,
+        mode,
+        false,
+    ))
 }
 
 #[test]
@@ -301,13 +294,7 @@ fn without_the_cascade_or_xfeats_model_a_slow_matcher_screens_with_its_own_featu
 
 #[test]
 fn xfeat_star_ranks_its_views_by_xfeat_keypoints_and_solves_the_rotated_pair() {
-    common::init();
-    let p = Pipeline::builder()
-        .matcher(Matcher::XFeatStar)
-        .models_dir(common::models_dir())
-        .threads(2)
-        .build()
-        .unwrap();
+    let p = common::matcher_pipeline(Matcher::XFeatStar, ViewMode::Auto, false);
     // Its semi-dense cells have no keypoint descriptors: the screen is XFeat's.
     assert_eq!(p.view_screen(), Matcher::XFeatMnn);
     let (a, b_rot, gt) = rotated_graffiti(135.0);

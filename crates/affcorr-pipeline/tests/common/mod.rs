@@ -19,9 +19,18 @@ pub fn graffiti_pipeline(
     views: affcorr_pipeline::ViewMode,
     guided: bool,
 ) -> affcorr_pipeline::Pipeline {
+    matcher_pipeline(affcorr_pipeline::Matcher::XFeatLighterGlue, views, guided)
+}
+
+/// [`graffiti_pipeline`] with `matcher` (its models from the models directory).
+pub fn matcher_pipeline(
+    matcher: affcorr_pipeline::Matcher,
+    views: affcorr_pipeline::ViewMode,
+    guided: bool,
+) -> affcorr_pipeline::Pipeline {
     init();
     affcorr_pipeline::Pipeline::builder()
-        .matcher(affcorr_pipeline::Matcher::XFeatLighterGlue)
+        .matcher(matcher)
         .max_keypoints(1024)
         .models_dir(models_dir())
         .threads(2)
