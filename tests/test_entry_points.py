@@ -92,6 +92,7 @@ def test_python_and_cli_defaults_are_the_rust_crates():
         "aliked_detection_threshold",
         "dense_matches",
         "refine_affine",
+        "exif_orientation",
         "views",
         "view_relative_budget",
         "guided_matching",
@@ -104,6 +105,7 @@ def test_python_and_cli_defaults_are_the_rust_crates():
     init = inspect.signature(affcorr.Pipeline.__init__).parameters
     assert init["max_keypoints"].default == d["max_keypoints"]
     assert init["refine_affine"].default == d["refine_affine"]
+    assert init["exif_orientation"].default == d["exif_orientation"]
     assert init["seed"].default == d["seed"]
     assert init["views"].default == d["views"]
     assert init["view_relative_budget"].default == d["view_relative_budget"]
@@ -120,6 +122,7 @@ def test_python_and_cli_defaults_are_the_rust_crates():
     args = p.parse_args(["homography", "a.png", "b.png"])
     assert args.threshold == d["homography_threshold"]
     assert args.max_keypoints == d["max_keypoints"] and args.refine_affine == d["refine_affine"]
+    assert args.exif_orientation == d["exif_orientation"]
     args = p.parse_args(["pose", "a.png", "b.png", "--K1", "1,1,0,0", "--K2", "1,1,0,0"])
     assert args.threshold == d["pose_threshold"]
     pipe = affcorr.Pipeline(threads=1)

@@ -52,6 +52,7 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     )?;
     d.set_item("dense_matches", defaults::DENSE_MATCHES)?;
     d.set_item("refine_affine", defaults::REFINE_AFFINE)?;
+    d.set_item("exif_orientation", defaults::EXIF_ORIENTATION)?;
     d.set_item("views", defaults::VIEWS.name())?;
     d.set_item("view_relative_budget", defaults::VIEW_RELATIVE_BUDGET)?;
     d.set_item("guided_matching", defaults::GUIDED_MATCHING)?;
@@ -238,6 +239,7 @@ impl PipelineRunner {
         aliked_lightglue_model = None, ort_library = None, max_keypoints = None,
         detection_threshold = None, max_matches = None, max_side = None, threads = None, seed = None,
         refine_affine = defaults::REFINE_AFFINE, drop_unreliable = false,
+        exif_orientation = defaults::EXIF_ORIENTATION,
         guided_matching = defaults::GUIDED_MATCHING,
         views = None, view_budget = None,
         view_relative_budget = defaults::VIEW_RELATIVE_BUDGET, max_views = None
@@ -264,6 +266,7 @@ impl PipelineRunner {
         seed: Option<&Bound<'_, PyAny>>,
         refine_affine: bool,
         drop_unreliable: bool,
+        exif_orientation: bool,
         guided_matching: bool,
         views: Option<&str>,
         view_budget: Option<f64>,
@@ -342,6 +345,7 @@ impl PipelineRunner {
         }
         b = b.affine_refinement(refine_affine.then(AffineRefineOptions::default));
         b = b.drop_unreliable(drop_unreliable);
+        b = b.exif_orientation(exif_orientation);
         b = b.guided_matching(guided_matching.then(GrowOptions::default));
         let mut view_options = ViewOptions::default();
         if let Some(mode) = views {
@@ -631,6 +635,12 @@ impl PipelineRunner {
         self.inner.seed()
     }
 
+    /// Whether image files are matched upright, as their EXIF orientation shows them.
+    #[getter]
+    fn exif_orientation(&self) -> bool {
+        self.inner.exif_orientation()
+    }
+
     /// The view cascade's mode: "off", "auto" or "full".
     #[getter]
     fn views(&self) -> &'static str {
@@ -766,16 +776,23 @@ impl PipelineFeatures {
         self.inner.matcher().name()
     }
 
-    /// (W, H) of the original image.
+    /// (W, H) of the original image as stored.
     #[getter]
     fn image_size(&self) -> (usize, usize) {
         self.inner.image_size()
     }
 
-    /// (W, H) at the working resolution.
+    /// (W, H) at the working resolution, upright.
     #[getter]
     fn working_size(&self) -> (usize, usize) {
         self.inner.working_size()
+    }
+
+    /// The EXIF orientation (1-8) the image was turned upright by before extraction; 1 for
+    /// arrays, untagged files, or with the pipeline's `exif_orientation` off.
+    #[getter]
+    fn orientation(&self) -> u8 {
+        self.inner.orientation().exif()
     }
 
     /// (N, 2) float64 keypoints in the original pixels (empty for a dense matcher).

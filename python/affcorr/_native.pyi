@@ -383,8 +383,11 @@ class PipelineFeatures:
     @property
     def working_size(self) -> tuple[int, int]: ...
     @property
+    def orientation(self) -> int:
+        """The EXIF orientation (1-8) the image was turned upright by before extraction."""
+    @property
     def keypoints(self) -> NDArray[np.float64]:
-        """(N, 2) in the original pixels (empty for a dense matcher)."""
+        """(N, 2) in the original (stored) pixels (empty for a dense matcher)."""
     @property
     def scores(self) -> NDArray[np.float32]: ...
     @property
@@ -429,6 +432,7 @@ class PipelineRunner:
         seed: int | None = None,
         refine_affine: bool = ...,
         drop_unreliable: bool = False,
+        exif_orientation: bool = ...,
         guided_matching: bool = ...,
         views: str | None = None,
         view_budget: float | None = None,
@@ -464,6 +468,8 @@ class PipelineRunner:
         another matcher or options raise ValueError naming the argument; GIL released."""
     @property
     def matcher(self) -> str: ...
+    @property
+    def exif_orientation(self) -> bool: ...
     @property
     def views(self) -> str: ...
     @property

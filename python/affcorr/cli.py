@@ -109,6 +109,7 @@ def _pipeline(args):
         shape_model=args.shape_model,
         refine_affine=args.refine_affine,
         drop_unreliable=args.drop_unreliable,
+        exif_orientation=args.exif_orientation,
         guided_matching=args.guided_matching,
         views=args.views,
         view_budget=args.view_budget,
@@ -162,6 +163,13 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
         default=PIPELINE_DEFAULTS["refine_affine"],
         help="refine the ACs against the images by affine Lucas-Kanade (affcorr.refine_affine; "
         "default: %(default)s)",
+    )
+    p.add_argument(
+        "--exif-orientation",
+        action=argparse.BooleanOptionalAction,
+        default=PIPELINE_DEFAULTS["exif_orientation"],
+        help="match image files as their EXIF orientation shows them; coordinates stay in the "
+        "files' stored pixels (default: %(default)s)",
     )
     p.add_argument(
         "--drop-unreliable",

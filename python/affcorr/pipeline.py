@@ -95,7 +95,9 @@ _D = PIPELINE_DEFAULTS
 
 
 #: One image's features (:meth:`Pipeline.extract`), immutable: ``matcher``, ``image_size``
-#: (W, H), ``working_size``, ``keypoints`` (N, 2) in the original pixels, ``scores`` (N,),
+#: (W, H) as stored, ``working_size`` (upright), ``orientation`` (the EXIF orientation 1-8 the
+#: image was turned upright by; 1 for arrays), ``keypoints`` (N, 2) in the original (stored)
+#: pixels, ``scores`` (N,),
 #: ``descriptors`` (N, D), ``seconds`` (extraction time), ``len()``; ``to_bytes()`` and
 #: ``Features.from_bytes(data)`` store them (a versioned binary format), and they pickle.
 Features = _native.PipelineFeatures
@@ -203,6 +205,13 @@ class Pipeline:
             matcher draws this many (``None``: ``DEFAULT_DENSE_MATCHES``, 2000).
         max_side: downscale images whose longer side exceeds this (pixels) before matching;
             ``None``: full resolution. Results are in the original pixels either way.
+        exif_orientation: match image files as their EXIF orientation shows them (upright),
+            so that a photograph taken in portrait meets one taken in landscape without a
+            turn. The ACs and keypoints are in the files' *stored* pixels either way (their
+            width and height as the file stores them; what COLMAP, PIL and
+            :func:`affcorr.read_gray_image` give, not ``cv2.imread``, which turns them):
+            only the images the matcher sees differ. Arrays are taken as they are. On by
+            default; :attr:`Features.orientation` says how an image was turned.
         threads: ONNX Runtime and Rust threads; ``None``: every core.
         shape_model: the shape network (``shape-v1``); ``None``: the bundled one, or
             ``shape.onnx`` of ``models_dir`` when that has one.
@@ -276,6 +285,7 @@ class Pipeline:
         seed: int = _D["seed"],
         refine_affine: bool = _D["refine_affine"],
         drop_unreliable: bool = False,
+        exif_orientation: bool = _D["exif_orientation"],
         guided_matching: bool = _D["guided_matching"],
         views: str = _D["views"],
         view_budget: float | None = None,
@@ -345,6 +355,7 @@ class Pipeline:
             seed=int(seed),
             refine_affine=bool(refine_affine),
             drop_unreliable=bool(drop_unreliable),
+            exif_orientation=bool(exif_orientation),
             guided_matching=bool(guided_matching),
             views=views,
             view_budget=view_budget,
@@ -383,6 +394,12 @@ class Pipeline:
     def seed(self) -> int:
         """The seed of a dense matcher's balanced sampling."""
         return self._runner.seed
+
+    @property
+    def exif_orientation(self) -> bool:
+        """Whether image files are matched upright, as their EXIF orientation shows them
+        (coordinates stay in their stored pixels)."""
+        return self._runner.exif_orientation
 
     @property
     def views(self) -> str:

@@ -7,13 +7,16 @@
 //! - Unreadable, truncated or corrupt files (including JPEGs cut short, which the decoder
 //!   itself would fill with grey) are [`ImageError::Open`] /
 //!   [`ImageError::Decode`]; bad raw buffers are [`ImageError::Buffer`].
+//! - Pixels are returned as the file stores them; its EXIF orientation is read beside them
+//!   ([`open_dynamic`], [`crate::Orientation`]), never applied here.
 
 use std::io::Cursor;
 use std::path::Path;
 
-use image::{DynamicImage, ImageReader};
+use image::{DynamicImage, ImageDecoder, ImageReader};
 
 use crate::error::{ImageError, Result};
+use crate::orientation::Orientation;
 
 /// The BT.601 luma weights of R, G and B.
 pub const LUMA_WEIGHTS: [f32; 3] = [0.299, 0.587, 0.114];
@@ -103,13 +106,14 @@ impl GrayImage {
         })
     }
 
-    /// Reads and decodes an image file (PNG or JPEG, recognised by content).
+    /// Reads and decodes an image file (PNG or JPEG, recognised by content), its pixels as
+    /// stored (an EXIF orientation is not applied).
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
-        let (img, name) = open_dynamic(path.as_ref())?;
+        let (img, name, _) = open_dynamic(path.as_ref())?;
         gray_from_dynamic(&img, &name)
     }
 
-    /// Decodes an encoded image (PNG or JPEG) held in memory.
+    /// Decodes an encoded image (PNG or JPEG) held in memory, its pixels as stored.
     pub fn decode(bytes: &[u8]) -> Result<Self> {
         decode(bytes, "from memory")
     }
@@ -198,16 +202,30 @@ fn jpeg_complete(bytes: &[u8]) -> bool {
 }
 
 fn decode(bytes: &[u8], source_name: &str) -> Result<GrayImage> {
-    gray_from_dynamic(&decode_dynamic(bytes, source_name)?, source_name)
+    gray_from_dynamic(&decode_dynamic(bytes, source_name)?.0, source_name)
 }
 
-/// Reads and decodes an image file in the decoder's pixel type, with the checks of
+/// Reads and decodes an image file in the decoder's pixel type, as stored, with the checks of
 /// [`GrayImage::open`] (for the dense matcher, which wants the colour too); also returns the
-/// name errors use for it.
-pub fn open_dynamic(path: &Path) -> Result<(DynamicImage, String)> {
+/// name errors use for it and the file's EXIF orientation (upright without one).
+pub fn open_dynamic(path: &Path) -> Result<(DynamicImage, String, Orientation)> {
     let name = format!("`{}`", path.display());
     let bytes = read_image_file(path, &name)?;
-    Ok((decode_dynamic(&bytes, &name)?, name))
+    let (img, orientation) = decode_dynamic(&bytes, &name)?;
+    Ok((img, name, orientation))
+}
+
+/// [`open_dynamic`], turned upright by the turn of the file's EXIF orientation
+/// ([`Orientation::turn`]: its mirror is never applied) when `upright`; the orientation
+/// returned is the turn applied (upright without `upright`).
+pub fn open_oriented(path: &Path, upright: bool) -> Result<(DynamicImage, String, Orientation)> {
+    let (mut img, name, orientation) = open_dynamic(path)?;
+    if !upright {
+        return Ok((img, name, Orientation::Upright));
+    }
+    let turn = orientation.turn();
+    turn.apply(&mut img);
+    Ok((img, name, turn))
 }
 
 /// The largest image file read: 256 MiB. The decoder's own limit (512 MiB of pixels) bounds
@@ -272,7 +290,7 @@ fn decode_error(source_name: &str, reason: String) -> ImageError {
     }
 }
 
-fn decode_dynamic(bytes: &[u8], source_name: &str) -> Result<DynamicImage> {
+fn decode_dynamic(bytes: &[u8], source_name: &str) -> Result<(DynamicImage, Orientation)> {
     let decode_error = |reason: String| decode_error(source_name, reason);
     let reader = ImageReader::new(Cursor::new(bytes))
         .with_guessed_format()
@@ -289,10 +307,26 @@ fn decode_dynamic(bytes: &[u8], source_name: &str) -> Result<DynamicImage> {
             "truncated JPEG (no end-of-image marker after the last scan)".to_string(),
         ));
     }
-    reader.decode().map_err(|e| match e {
+    let decoder_error = |e: image::ImageError| match e {
         image::ImageError::Limits(_) => decode_error(too_large(bytes, &e)),
         e => decode_error(e.to_string()),
-    })
+    };
+    let mut decoder = reader.into_decoder().map_err(decoder_error)?;
+    // What `ImageReader::decode` does: the decoded buffer is refused before it is allocated
+    // when it would exceed the decoder's limit (512 MiB).
+    let mut limits = image::Limits::default();
+    limits
+        .reserve(decoder.total_bytes())
+        .map_err(decoder_error)?;
+    decoder.set_limits(limits).map_err(decoder_error)?;
+    // A damaged EXIF block leaves the pixels as stored, as image viewers do: it does not make
+    // the image unreadable.
+    let orientation = decoder
+        .orientation()
+        .map(Orientation::from_image)
+        .unwrap_or_default();
+    let img = DynamicImage::from_decoder(decoder).map_err(decoder_error)?;
+    Ok((img, orientation))
 }
 
 /// Names the size of an image refused by the decoder's allocation limit (`image`'s default
@@ -372,5 +406,53 @@ mod tests {
         let e = reason(GrayImage::open(&big).unwrap_err());
         assert!(e.contains("over the 256 MiB limit"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+    /// A 6 × 4 gray ramp encoded as `format`.
+    fn encoded(format: image::ImageFormat) -> Vec<u8> {
+        let img = image::GrayImage::from_fn(6, 4, |x, y| [(40 * y + 10 * x) as u8].into());
+        let mut out = Cursor::new(Vec::new());
+        DynamicImage::ImageLuma8(img)
+            .write_to(&mut out, format)
+            .unwrap();
+        out.into_inner()
+    }
+
+    #[test]
+    fn the_exif_orientation_is_read_beside_the_stored_pixels() {
+        use crate::orientation::with_exif_orientation;
+        let dir = std::env::temp_dir().join(format!("affcorr-exif-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for format in [image::ImageFormat::Jpeg, image::ImageFormat::Png] {
+            let plain = encoded(format);
+            let stored = GrayImage::decode(&plain).unwrap();
+            for o in Orientation::ALL {
+                let path = dir.join(format!("o{}.{}", o.exif(), format.extensions_str()[0]));
+                std::fs::write(&path, with_exif_orientation(&plain, u16::from(o.exif()))).unwrap();
+                let (img, _, got) = open_dynamic(&path).unwrap();
+                assert_eq!(got, o, "{format:?}");
+                // The pixels stay as stored: only the tag differs from the plain file.
+                assert_eq!(GrayImage::open(&path).unwrap(), stored, "{format:?} {o:?}");
+                assert_eq!((img.width(), img.height()), (6, 4));
+            }
+            // A value outside 1-8 reads as upright, and the image still decodes.
+            let path = dir.join(format!("bad.{}", format.extensions_str()[0]));
+            std::fs::write(&path, with_exif_orientation(&plain, 9)).unwrap();
+            let (_, _, got) = open_dynamic(&path).unwrap();
+            assert_eq!(got, Orientation::Upright, "{format:?}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_damaged_exif_block_leaves_the_image_readable_and_upright() {
+        let plain = encoded(image::ImageFormat::Jpeg);
+        // An APP1 "Exif" segment whose TIFF header is garbage.
+        let mut bytes = plain[..2].to_vec();
+        bytes.extend_from_slice(&[0xFF, 0xE1, 0x00, 0x10]);
+        bytes.extend_from_slice(b"Exif\0\0garbage!");
+        bytes.extend_from_slice(&plain[2..]);
+        let (img, orientation) = decode_dynamic(&bytes, "test").unwrap();
+        assert_eq!(orientation, Orientation::Upright);
+        assert_eq!((img.width(), img.height()), (6, 4));
     }
 }

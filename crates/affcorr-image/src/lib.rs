@@ -27,6 +27,7 @@ pub mod affine_refine;
 pub mod confidence;
 pub mod error;
 pub mod gray;
+pub mod orientation;
 pub mod patches;
 pub mod resize;
 pub mod rgb;
@@ -36,6 +37,7 @@ pub use affine_refine::{AffineRefineOptions, AffineRefinement, RefineStatus, ref
 pub use confidence::{AcConfidence, ConfidenceModel, NetworkSpread, affine_confidence};
 pub use error::{ImageError, Result};
 pub use gray::{GrayImage, LUMA_WEIGHTS, PixelData};
+pub use orientation::Orientation;
 pub use patches::{PATCH_LEN, PATCH_SIZE, Patches, extract_named, extract_patches};
 pub use resize::{ac_to_original, limit_side};
 pub use rgb::RgbImage;

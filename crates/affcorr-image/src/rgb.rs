@@ -65,9 +65,9 @@ impl RgbImage {
     }
 
     /// Reads and decodes a PNG or JPEG file in colour (gray files give R = G = B; alpha is
-    /// ignored), with [`GrayImage::open`]'s errors.
+    /// ignored), its pixels as stored, with [`GrayImage::open`]'s errors.
     pub fn open(path: impl AsRef<Path>) -> Result<Self> {
-        let (img, _) = crate::gray::open_dynamic(path.as_ref())?;
+        let (img, _, _) = crate::gray::open_dynamic(path.as_ref())?;
         Ok(Self::from_dynamic(&img))
     }
 

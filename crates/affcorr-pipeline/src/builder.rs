@@ -74,6 +74,7 @@ pub struct PipelineBuilder {
     shape_batch_size: usize,
     affine_refinement: Option<AffineRefineOptions>,
     drop_unreliable: bool,
+    exif_orientation: bool,
     views: ViewOptions,
     guided_matching: Option<GrowOptions>,
     seed: u64,
@@ -101,6 +102,7 @@ impl Default for PipelineBuilder {
             shape_batch_size: affcorr_runner::shape::DEFAULT_BATCH_SIZE,
             affine_refinement: defaults::REFINE_AFFINE.then(AffineRefineOptions::default),
             drop_unreliable: false,
+            exif_orientation: defaults::EXIF_ORIENTATION,
             views: ViewOptions::default(),
             guided_matching: defaults::GUIDED_MATCHING.then(GrowOptions::default),
             seed: defaults::SEED,
@@ -253,6 +255,16 @@ impl PipelineBuilder {
     /// false: every match comes back, each with its `affine_confidence` and `reliable` flag.
     pub fn drop_unreliable(mut self, drop: bool) -> Self {
         self.drop_unreliable = drop;
+        self
+    }
+
+    /// Whether image files are matched upright, as their EXIF orientation shows them
+    /// (module `affcorr_image::orientation`). The ACs and keypoints are in the files' stored
+    /// pixels either way (as COLMAP and PIL read them); only the images the matcher sees
+    /// differ. Decoded images (arrays) are taken as they are. Default
+    /// ([`defaults::EXIF_ORIENTATION`]): on.
+    pub fn exif_orientation(mut self, upright: bool) -> Self {
+        self.exif_orientation = upright;
         self
     }
 
@@ -409,6 +421,7 @@ impl PipelineBuilder {
             shape,
             affine_refinement: self.affine_refinement.clone(),
             drop_unreliable: self.drop_unreliable,
+            exif_orientation: self.exif_orientation,
             views: self.views.clone(),
             guided_matching: self.guided_matching.clone(),
             max_matches,

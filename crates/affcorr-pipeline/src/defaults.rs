@@ -83,6 +83,11 @@ pub const DENSE_MATCHES: usize = 2000;
 /// Whether the network's ACs are refined against the images by affine Lucas–Kanade.
 pub const REFINE_AFFINE: bool = true;
 
+/// Whether image files are matched as their EXIF orientation shows them (upright), with every
+/// coordinate still in their stored pixels (`affcorr_image::orientation`): a photograph taken
+/// in portrait beside one in landscape is then matched without a turn.
+pub const EXIF_ORIENTATION: bool = true;
+
 /// The view cascade: synthetic views only when the plain pair fails verification.
 pub const VIEWS: ViewMode = ViewMode::Auto;
 

@@ -3,13 +3,15 @@
 //! with results bit-identical to [`crate::Pipeline::match_pair`]'s.
 //!
 //! A feature set holds the working image (the shape network's patches and the affine
-//! refinement read it; the view cascade warps it), its scale from the original pixels, and the
-//! matcher's keypoints and descriptors ([`ImageFeatures`]). [`Features::to_bytes`] and
+//! refinement read it; the view cascade warps it), its scale from the original pixels, the
+//! turn of a file's EXIF orientation that it was shown upright by (coordinates are reported in
+//! the file's stored pixel grid: `affcorr_image::orientation`), and the matcher's keypoints
+//! and descriptors ([`ImageFeatures`]). [`Features::to_bytes`] and
 //! [`Features::from_bytes`] store it (little-endian, versioned), for a cache on disk.
 
 use std::time::Duration;
 
-use affcorr_image::{GrayImage, RgbImage};
+use affcorr_image::{AffineWarp, GrayImage, Orientation, RgbImage};
 use affcorr_runner::{
     DenseFeatures, FeatureData, ImageFeatures, Matcher, MatcherTimings, SparseFeatures,
 };
@@ -19,11 +21,15 @@ use crate::error::{PipelineError, Result};
 /// One image's features ([`crate::Pipeline::extract`]); cloneable, `Send` and `Sync`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Features {
-    /// The image at the working resolution (after `max_side`).
+    /// The image at the working resolution (after `max_side`), shown upright (`orientation`).
     pub(crate) work: GrayImage,
-    /// Working pixels per original pixel, (x, y) ([`affcorr_image::limit_side`]).
+    /// Working pixels per original pixel, (x, y) of the upright image
+    /// ([`affcorr_image::limit_side`]).
     pub(crate) scale: [f64; 2],
-    /// (W, H) of the original image.
+    /// How the original image was turned upright before extraction: its file's EXIF
+    /// orientation, or upright (arrays, or the pipeline's `exif_orientation` off).
+    pub(crate) orientation: Orientation,
+    /// (W, H) of the original image as stored (before `orientation`'s turn).
     pub(crate) original_size: (usize, usize),
     /// The matcher's features of the working image.
     pub(crate) matcher: ImageFeatures,
@@ -37,8 +43,9 @@ pub struct Features {
 }
 
 const MAGIC: &[u8; 4] = b"AFCF";
-/// 2: the detection threshold after the keypoint budget.
-const VERSION: u32 = 2;
+/// 2: the detection threshold after the keypoint budget; 3: the orientation after the original
+/// size.
+const VERSION: u32 = 3;
 
 impl Features {
     /// The matcher that computed them.
@@ -46,9 +53,21 @@ impl Features {
         self.matcher.matcher
     }
 
-    /// (W, H) of the original image.
+    /// (W, H) of the original image as stored (as its file's header gives it).
     pub fn image_size(&self) -> (usize, usize) {
         self.original_size
+    }
+
+    /// How the image was turned upright before extraction (its file's EXIF orientation;
+    /// upright for arrays, or with the pipeline's `exif_orientation` off).
+    pub fn orientation(&self) -> Orientation {
+        self.orientation
+    }
+
+    /// The map from the stored pixels to the upright ones, when the image was turned.
+    pub(crate) fn upright_warp(&self) -> Option<AffineWarp> {
+        let (w, h) = self.original_size;
+        (!self.orientation.is_upright()).then(|| self.orientation.display_warp(w, h).0)
     }
 
     /// (W, H) at the working resolution.
@@ -71,18 +90,24 @@ impl Features {
         self.matcher.is_empty()
     }
 
-    /// The keypoints in the original image's pixels (pixel centres at integers), as the ACs
-    /// are: x = (x_work + 0.5)/s − 0.5 per axis; empty for a dense matcher.
+    /// The keypoints in the original image's stored pixels (pixel centres at integers), as the
+    /// ACs are: x = (x_work + 0.5)/s − 0.5 per axis, turned back from upright; empty for a
+    /// dense matcher.
     pub fn keypoints(&self) -> Vec<[f64; 2]> {
         let [sx, sy] = self.scale;
+        let to_stored = self.upright_warp().map(|w| {
+            w.inverse()
+                .expect("an orientation's warp is a signed permutation")
+        });
         self.matcher
             .keypoints()
             .iter()
             .map(|&[x, y]| {
-                [
+                let p = [
                     (f64::from(x) + 0.5) / sx - 0.5,
                     (f64::from(y) + 0.5) / sy - 0.5,
-                ]
+                ];
+                to_stored.map_or(p, |w| w.apply(p))
             })
             .collect()
     }
@@ -142,6 +167,7 @@ impl Features {
         w.f64(self.detection_threshold.map_or(f64::NAN, f64::from));
         w.u64(self.max_side.map_or(0, |s| s as u64));
         w.size(self.original_size);
+        w.u32(u32::from(self.orientation.exif()));
         w.f64(self.scale[0]);
         w.f64(self.scale[1]);
         w.size((self.work.width(), self.work.height()));
@@ -194,6 +220,10 @@ impl Features {
             s => Some(s),
         };
         let original_size = r.size()?;
+        let orientation = u8::try_from(r.u32()?)
+            .ok()
+            .and_then(Orientation::from_exif)
+            .ok_or_else(|| bad("unknown orientation"))?;
         let scale = [r.f64()?, r.f64()?];
         let (ww, wh) = r.size()?;
         let work =
@@ -260,6 +290,7 @@ impl Features {
         Ok(Self {
             work,
             scale,
+            orientation,
             original_size,
             matcher: ImageFeatures {
                 matcher,
@@ -394,6 +425,7 @@ mod tests {
         Features {
             work: GrayImage::new(3, 2, vec![0.0, 0.1, 0.2, 0.3, 0.4, 0.5]).unwrap(),
             scale: [0.5, 0.5],
+            orientation: Orientation::Upright,
             original_size: (6, 4),
             matcher: ImageFeatures {
                 matcher,
@@ -451,5 +483,17 @@ mod tests {
             Matcher::XFeatMnn,
         );
         assert_eq!(f.keypoints(), vec![[2.5, 1.5]]);
+        // Stored 4 × 6 and shown turned by 90° clockwise (6 × 4): the shown (x, y) is the stored
+        // (y, 6 - 1 - x), so the upright (2.5, 1.5) is stored at (1.5, 2.5); the orientation
+        // survives the bytes.
+        let turned = Features {
+            orientation: Orientation::Rotate90,
+            original_size: (4, 6),
+            ..f
+        };
+        assert_eq!(turned.keypoints(), vec![[1.5, 2.5]]);
+        let back = Features::from_bytes(&turned.to_bytes()).unwrap();
+        assert_eq!(back.orientation(), Orientation::Rotate90);
+        assert_eq!(back, turned);
     }
 }

@@ -23,9 +23,12 @@
 //!
 //! # What `match_pair` does
 //!
-//! 1. **decode**: file paths are decoded to grayscale ([`GrayImage`]); an image whose longer
-//!    side exceeds [`PipelineBuilder::max_side`] is downscaled (antialiased triangle filter) by
-//!    s = max_side / max(W, H) to its *working resolution* ([`affcorr_image::limit_side`]);
+//! 1. **decode**: file paths are decoded to grayscale ([`GrayImage`]) and turned upright by the
+//!    turn of their EXIF orientation (a photograph taken in portrait;
+//!    [`PipelineBuilder::exif_orientation`], on by default; `affcorr_image::orientation`); an
+//!    image whose longer side exceeds [`PipelineBuilder::max_side`] is downscaled
+//!    (antialiased triangle filter) by s = max_side / max(W, H) to its *working resolution*
+//!    ([`affcorr_image::limit_side`]);
 //!    the matcher's inputs are resized to multiples of 32.
 //! 2. **matcher**: the backbone network (once per image; twice for XFeat*, at scales 0.6 and
 //!    1.3), or the dense matcher on the pair (colour images resized to its input size).
@@ -46,7 +49,9 @@
 //!    mapped back through the view's warp ([`views`]; on by default, [`ViewMode::Auto`]).
 //! 8. The ACs are mapped back to the original pixels (pixel centres at integers, image edges
 //!    aligned): x = (x_work + 0.5)/s − 0.5 per axis, and A = diag(1/s_B) · A_work · diag(s_A)
-//!    (A = ∂x2/∂x1, docs/design.md §2; [`affcorr_image::ac_to_original`]).
+//!    (A = ∂x2/∂x1, docs/design.md §2; [`affcorr_image::ac_to_original`]), then turned back
+//!    into a file's stored pixels (exact: [`affcorr_image::ac_from_views`] with the turn's
+//!    [`affcorr_image::Orientation::display_warp`]).
 //!
 //! [`Pipeline::homography`], [`Pipeline::fundamental`] and [`Pipeline::relative_pose`] add
 //! **ransac**: affcorr-ransac's estimators on the ACs (AC samples unless the options say

@@ -92,6 +92,7 @@ pub struct Pipeline {
     pub(crate) shape: ShapeEstimator,
     pub(crate) affine_refinement: Option<AffineRefineOptions>,
     pub(crate) drop_unreliable: bool,
+    pub(crate) exif_orientation: bool,
     pub(crate) views: ViewOptions,
     pub(crate) guided_matching: Option<GrowOptions>,
     pub(crate) max_matches: Option<usize>,
@@ -214,6 +215,12 @@ impl Pipeline {
     /// Whether unreliable ACs are dropped ([`PipelineBuilder::drop_unreliable`]).
     pub fn drop_unreliable(&self) -> bool {
         self.drop_unreliable
+    }
+
+    /// Whether image files are matched upright, as their EXIF orientation shows them
+    /// ([`PipelineBuilder::exif_orientation`]).
+    pub fn exif_orientation(&self) -> bool {
+        self.exif_orientation
     }
 
     /// The affine refinement's options (`None` when it is off).
@@ -432,19 +439,28 @@ impl Pipeline {
     ) -> Result<Features> {
         let mut t = Instant::now();
         let dense = self.matcher() == Matcher::Dense;
-        let (img, colour) = if dense {
-            let (g, c) = src
-                .load_with_colour()
+        let upright = self.exif_orientation;
+        let (img, colour, orientation) = if dense {
+            let (g, c, o) = src
+                .load_with_colour(upright)
                 .map_err(|e| PipelineError::image(e, what))?;
-            (g, Some(c))
+            (g, Some(c), o)
         } else {
-            (src.load().map_err(|e| PipelineError::image(e, what))?, None)
+            let (g, o) = src
+                .load(upright)
+                .map_err(|e| PipelineError::image(e, what))?;
+            (g, None, o)
         };
         let (work, scale) = limit_side(&img, self.max_side);
         if !dense {
             check_working_size(&img, &work, what)?;
         }
-        let original_size = (img.width(), img.height());
+        // The size as stored: every coordinate is reported in the stored pixels.
+        let original_size = if orientation.swaps_axes() {
+            (img.height(), img.width())
+        } else {
+            (img.width(), img.height())
+        };
         let work = match work {
             std::borrow::Cow::Owned(w) => w,
             std::borrow::Cow::Borrowed(_) => img.into_owned(),
@@ -454,6 +470,7 @@ impl Pipeline {
         Ok(Features {
             work,
             scale,
+            orientation,
             original_size,
             matcher,
             max_keypoints: self.max_keypoints(),
@@ -529,10 +546,25 @@ impl Pipeline {
             }
             _ => work,
         };
+        // Working pixels to the upright originals, then back into the stored pixels of an
+        // image that was turned upright (its EXIF orientation): exact, a signed permutation.
+        let stored = match (fa.upright_warp(), fb.upright_warp()) {
+            (None, None) => None,
+            (wa, wb) => Some((
+                wa.unwrap_or(AffineWarp::IDENTITY),
+                wb.unwrap_or(AffineWarp::IDENTITY),
+            )),
+        };
         let corrs = work
             .corrs
             .iter()
-            .map(|row| ac_to_original(row, fa.scale, fb.scale))
+            .map(|row| {
+                let row = ac_to_original(row, fa.scale, fb.scale);
+                stored.map_or(row, |(wa, wb)| {
+                    ac_from_views(&row, &wa, &wb)
+                        .expect("an orientation's warp is a signed permutation")
+                })
+            })
             .collect();
         timings.total = start.elapsed() + fa.extraction_time() + fb.extraction_time();
         tracing::debug!(

@@ -3,8 +3,8 @@
 use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
-use affcorr_image::gray::{gray_from_dynamic, open_dynamic};
-use affcorr_image::{GrayImage, ImageError, RgbImage};
+use affcorr_image::gray::{gray_from_dynamic, open_oriented};
+use affcorr_image::{GrayImage, ImageError, Orientation, RgbImage};
 
 /// An image argument: decoded already, or a file to decode (PNG, JPEG).
 #[derive(Debug, Clone, Copy)]
@@ -49,25 +49,42 @@ impl<'a> From<&'a str> for ImageSource<'a> {
 }
 
 impl<'a> ImageSource<'a> {
-    /// The gray image (decoded from a file, or the luma of a colour one).
-    pub fn load(self) -> Result<Cow<'a, GrayImage>, ImageError> {
+    /// The gray image (decoded from a file, or the luma of a colour one) and the orientation
+    /// it was turned by: with `upright`, a file is turned as its EXIF orientation shows it
+    /// (module `affcorr_image::orientation`); otherwise, and for decoded images, it is as
+    /// stored and the orientation upright.
+    pub fn load(self, upright: bool) -> Result<(Cow<'a, GrayImage>, Orientation), ImageError> {
         match self {
-            Self::Image(img) => Ok(Cow::Borrowed(img)),
-            Self::Rgb(img) => img.to_gray().map(Cow::Owned),
-            Self::Path(p) => GrayImage::open(p).map(Cow::Owned),
+            Self::Image(img) => Ok((Cow::Borrowed(img), Orientation::Upright)),
+            Self::Rgb(img) => Ok((Cow::Owned(img.to_gray()?), Orientation::Upright)),
+            Self::Path(p) => {
+                let (img, name, orientation) = open_oriented(p, upright)?;
+                Ok((Cow::Owned(gray_from_dynamic(&img, &name)?), orientation))
+            }
         }
     }
 
-    /// The gray image and the colour one a dense matcher takes, decoded once (a gray image
+    /// [`Self::load`], with the colour image a dense matcher takes, decoded once (a gray image
     /// gives R = G = B).
-    pub fn load_with_colour(self) -> Result<(Cow<'a, GrayImage>, RgbImage), ImageError> {
+    pub fn load_with_colour(
+        self,
+        upright: bool,
+    ) -> Result<(Cow<'a, GrayImage>, RgbImage, Orientation), ImageError> {
         match self {
-            Self::Image(img) => Ok((Cow::Borrowed(img), RgbImage::from_gray(img))),
-            Self::Rgb(img) => Ok((Cow::Owned(img.to_gray()?), img.clone())),
+            Self::Image(img) => Ok((
+                Cow::Borrowed(img),
+                RgbImage::from_gray(img),
+                Orientation::Upright,
+            )),
+            Self::Rgb(img) => Ok((
+                Cow::Owned(img.to_gray()?),
+                img.clone(),
+                Orientation::Upright,
+            )),
             Self::Path(p) => {
-                let (img, name) = open_dynamic(p)?;
+                let (img, name, orientation) = open_oriented(p, upright)?;
                 let gray = gray_from_dynamic(&img, &name)?;
-                Ok((Cow::Owned(gray), RgbImage::from_dynamic(&img)))
+                Ok((Cow::Owned(gray), RgbImage::from_dynamic(&img), orientation))
             }
         }
     }

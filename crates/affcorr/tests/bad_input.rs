@@ -452,7 +452,7 @@ fn png_header(w: u32, h: u32, depth: u8, colour: u8) -> Vec<u8> {
         let start = out.len();
         out.extend(kind);
         out.extend(data);
-        out.extend(crc32(&out[start..]).to_be_bytes());
+        out.extend(crc32fast::hash(&out[start..]).to_be_bytes());
     }
     let mut ihdr = Vec::new();
     ihdr.extend(w.to_be_bytes());
@@ -470,21 +470,6 @@ fn png_header(w: u32, h: u32, depth: u8, colour: u8) -> Vec<u8> {
     );
     chunk(&mut out, b"IEND", &[]);
     out
-}
-
-fn crc32(bytes: &[u8]) -> u32 {
-    let mut c = !0u32;
-    for &b in bytes {
-        c ^= u32::from(b);
-        for _ in 0..8 {
-            c = if c & 1 != 0 {
-                0xEDB8_8320 ^ (c >> 1)
-            } else {
-                c >> 1
-            };
-        }
-    }
-    !c
 }
 
 #[test]

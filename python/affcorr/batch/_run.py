@@ -231,6 +231,7 @@ def run(
         max_matches=probe.max_matches,
         max_side=probe.max_side,
         views=probe.views,
+        exif_orientation=probe.exif_orientation,
         refine_affine=(
             PIPELINE_DEFAULTS["refine_affine"] if refine_affine is None else bool(refine_affine)
         ),
