@@ -1,6 +1,7 @@
 //! Helpers for affcorr's own tests and benches, never a dependency of a library crate: where
-//! the checkout is, and which ONNX Runtime library its tests load. The libraries themselves
-//! take the library from the caller or `ORT_DYLIB_PATH` only.
+//! the checkout is, which ONNX Runtime library its tests load, and image files tagged with an
+//! EXIF orientation. The libraries themselves take the ONNX Runtime library from the caller or
+//! `ORT_DYLIB_PATH` only.
 
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
@@ -137,4 +138,40 @@ pub fn exported(file: &str, what: &str, command: &str) -> bool {
     );
     eprintln!("note: {what} not exported ({command}); its tests not run");
     false
+}
+
+/// A JPEG or PNG file's bytes with an EXIF block holding only the orientation `tag` (any
+/// value, valid or not), for tests: an APP1 segment after a JPEG's start-of-image marker, an
+/// eXIf chunk after a PNG's header chunk.
+pub fn with_exif_orientation(file: &[u8], tag: u16) -> Vec<u8> {
+    // A little-endian TIFF header, one IFD with one entry (0x0112, SHORT, count 1), no next IFD.
+    let mut tiff = b"II*\0".to_vec();
+    tiff.extend_from_slice(&8u32.to_le_bytes());
+    tiff.extend_from_slice(&1u16.to_le_bytes());
+    tiff.extend_from_slice(&0x0112u16.to_le_bytes());
+    tiff.extend_from_slice(&3u16.to_le_bytes());
+    tiff.extend_from_slice(&1u32.to_le_bytes());
+    tiff.extend_from_slice(&tag.to_le_bytes());
+    tiff.extend_from_slice(&[0, 0]);
+    tiff.extend_from_slice(&0u32.to_le_bytes());
+    let mut out = Vec::with_capacity(file.len() + tiff.len() + 32);
+    if file.starts_with(&[0xFF, 0xD8]) {
+        let payload = [b"Exif\0\0".as_slice(), &tiff].concat();
+        out.extend_from_slice(&file[..2]);
+        out.extend_from_slice(&[0xFF, 0xE1]);
+        out.extend_from_slice(&((payload.len() + 2) as u16).to_be_bytes());
+        out.extend_from_slice(&payload);
+        out.extend_from_slice(&file[2..]);
+    } else {
+        // PNG: the signature (8 bytes) and IHDR (4 + 4 + 13 + 4) come first.
+        let at = 8 + 25;
+        let mut chunk = (tiff.len() as u32).to_be_bytes().to_vec();
+        let body = [b"eXIf".as_slice(), &tiff].concat();
+        chunk.extend_from_slice(&body);
+        chunk.extend_from_slice(&crc32fast::hash(&body).to_be_bytes());
+        out.extend_from_slice(&file[..at]);
+        out.extend_from_slice(&chunk);
+        out.extend_from_slice(&file[at..]);
+    }
+    out
 }

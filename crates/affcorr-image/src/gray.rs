@@ -419,7 +419,7 @@ mod tests {
 
     #[test]
     fn the_exif_orientation_is_read_beside_the_stored_pixels() {
-        use crate::orientation::with_exif_orientation;
+        use affcorr_devtools::with_exif_orientation;
         let dir = std::env::temp_dir().join(format!("affcorr-exif-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         for format in [image::ImageFormat::Jpeg, image::ImageFormat::Png] {

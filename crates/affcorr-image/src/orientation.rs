@@ -147,43 +147,6 @@ impl Orientation {
     ];
 }
 
-/// A JPEG or PNG file's bytes with an EXIF block holding only the orientation `tag` (any
-/// value, valid or not), for tests: an APP1 segment after a JPEG's start-of-image marker, an
-/// eXIf chunk after a PNG's header chunk.
-#[doc(hidden)]
-pub fn with_exif_orientation(file: &[u8], tag: u16) -> Vec<u8> {
-    // A little-endian TIFF header, one IFD with one entry (0x0112, SHORT, count 1), no next IFD.
-    let mut tiff = b"II*\0".to_vec();
-    tiff.extend_from_slice(&8u32.to_le_bytes());
-    tiff.extend_from_slice(&1u16.to_le_bytes());
-    tiff.extend_from_slice(&0x0112u16.to_le_bytes());
-    tiff.extend_from_slice(&3u16.to_le_bytes());
-    tiff.extend_from_slice(&1u32.to_le_bytes());
-    tiff.extend_from_slice(&tag.to_le_bytes());
-    tiff.extend_from_slice(&[0, 0]);
-    tiff.extend_from_slice(&0u32.to_le_bytes());
-    let mut out = Vec::with_capacity(file.len() + tiff.len() + 32);
-    if file.starts_with(&[0xFF, 0xD8]) {
-        let payload = [b"Exif\0\0".as_slice(), &tiff].concat();
-        out.extend_from_slice(&file[..2]);
-        out.extend_from_slice(&[0xFF, 0xE1]);
-        out.extend_from_slice(&((payload.len() + 2) as u16).to_be_bytes());
-        out.extend_from_slice(&payload);
-        out.extend_from_slice(&file[2..]);
-    } else {
-        // PNG: the signature (8 bytes) and IHDR (4 + 4 + 13 + 4) come first.
-        let at = 8 + 25;
-        let mut chunk = (tiff.len() as u32).to_be_bytes().to_vec();
-        let body = [b"eXIf".as_slice(), &tiff].concat();
-        chunk.extend_from_slice(&body);
-        chunk.extend_from_slice(&crc32fast::hash(&body).to_be_bytes());
-        out.extend_from_slice(&file[..at]);
-        out.extend_from_slice(&chunk);
-        out.extend_from_slice(&file[at..]);
-    }
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;

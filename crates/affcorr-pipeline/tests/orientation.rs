@@ -10,8 +10,8 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
+use affcorr_devtools::with_exif_orientation;
 use affcorr_geom::Mat3;
-use affcorr_image::orientation::with_exif_orientation;
 use affcorr_image::{GrayImage, Orientation};
 use affcorr_pipeline::{Features, Geometry, Pipeline, ViewSpec};
 
