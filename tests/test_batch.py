@@ -315,3 +315,46 @@ def test_shipped_models_share_one_folder_per_content(tmp_path) -> None:
     assert shipped_models_dir(files, root=tmp_path) == first
     assert (first / "shape.onnx").read_bytes() == b"shape bytes"
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted([first.name, other.name])
+
+
+def test_a_portrait_photo_is_matched_upright_and_written_in_its_stored_pixels(
+    images, tmp_path
+) -> None:
+    """A view stored turned by 90 degrees counter-clockwise with the EXIF tag of a camera held
+    in portrait (6): the batch matches it upright (views off: the plain pass alone, which a
+    quarter turn would defeat) and writes its keypoints, size and H in the stored pixels, as
+    COLMAP reads the file (docs/design.md section 2)."""
+    PIL = pytest.importorskip("PIL.Image")
+    folder, names = images
+    portrait = tmp_path / "images"
+    portrait.mkdir()
+    (portrait / names[0]).write_bytes((folder / names[0]).read_bytes())
+    exif = PIL.Exif()
+    exif[0x0112] = 6
+    PIL.open(folder / names[1]).rotate(90, expand=True).save(portrait / "p.png", exif=exif)
+    s = batch.run(
+        [(names[0], "p.png")], portrait, tmp_path / "out", geometry=["homography"],
+        progress=False, **OPTIONS,
+    )  # fmt: skip
+    assert s.matched == 1, s
+    with h5py.File(tmp_path / "out" / "features.h5", "r") as fd:
+        assert tuple(fd["p.png"]["image_size"][()]) == (256, 320)  # stored: 256 wide, 320 high
+        k = fd["p.png"]["keypoints"][()]
+        assert k[:, 0].max() <= 255.5 and k[:, 1].max() <= 319.5
+    H = read_matches(tmp_path / "out")[(names[0], "p.png")]["H"]
+    # The same pair upright, mapped into the stored pixels: shown (x, y) = (319 - y, x).
+    H_up, _ = affcorr.Pipeline(threads=1, **OPTIONS).homography(
+        folder / names[0], folder / names[1]
+    )
+    shown_from_stored = np.array([[0, -1, 319], [1, 0, 0], [0, 0, 1.0]])
+    grid = np.c_[
+        np.stack(np.meshgrid(np.arange(0, 320, 40), np.arange(0, 256, 40)), -1).reshape(-1, 2),
+        np.ones(56),
+    ]
+
+    def project(m):
+        p = grid @ m.T
+        return p[:, :2] / p[:, 2:]
+
+    err = np.linalg.norm(project(H) - project(np.linalg.inv(shown_from_stored) @ H_up), axis=1)
+    assert np.median(err) < 1.0, np.median(err)
