@@ -86,7 +86,7 @@ def main(argv=None) -> None:
     from affcorr.pipeline import PIPELINE_DEFAULTS
 
     from .eval import pose_data
-    from .eval.pose import rotation_error, translation_error
+    from .eval.pose import pair_pose_error
     from .views import cases, overlap_error
 
     planar = [c for c in cases(1, ("rotation",)) if c[1] == "B rotated 0°"]
@@ -132,19 +132,7 @@ def main(argv=None) -> None:
                             err = float("inf")
                         solved = err < SOLVED_PX
                     else:
-                        corrs = corrs[job.keep(corrs[:, :2], corrs[:, 2:4])]
-                        err = float("inf")
-                        if len(corrs) >= 5:
-                            try:
-                                pose_est, _ = affcorr.estimate_relative_pose(
-                                    corrs, job.K1, job.K2, threshold=thr_p
-                                )
-                                err = max(
-                                    rotation_error(pose_est.R, job.R),
-                                    translation_error(pose_est.t, job.t),
-                                )
-                            except (RuntimeError, ValueError):
-                                pass
+                        err, _ = pair_pose_error(job, corrs, thr_p)
                         solved = err < SOLVED_DEG
                     rows.append(
                         dict(

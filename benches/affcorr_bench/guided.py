@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from . import common
-from .eval.pose import pose_auc, rotation_error, translation_error
+from .eval.pose import pair_pose_error, pose_auc
 from .views import overlap_error
 
 
@@ -72,16 +72,9 @@ def main(argv=None) -> None:
         for g, pipe in pipes.items():
             t = time.perf_counter()
             res = pipe.match_pair(img1, img2)
-            c = res.corrs[pp.keep(res.corrs[:, :2], res.corrs[:, 2:4])]
-            err = float("inf")
-            if len(c) >= 5:
-                try:
-                    pose, _ = affcorr.estimate_relative_pose(c, pp.K1, pp.K2, threshold=thr)
-                    err = max(rotation_error(pose.R, pp.R), translation_error(pose.t, pp.t))
-                except (RuntimeError, ValueError):
-                    pass
+            err, kept = pair_pose_error(pp, res.corrs, thr)
             rows.append(
-                dict(kind=pp.dataset, pair=pp.name, guided=g, matches=len(c), correct=-1,
+                dict(kind=pp.dataset, pair=pp.name, guided=g, matches=kept, correct=-1,
                      error=err, seconds=time.perf_counter() - t)
             )  # fmt: skip
     out = Path(args.out)

@@ -156,19 +156,9 @@ def upstream(extractor: str, k: int):
 
 
 def pose_error(pair, x1, x2) -> tuple[float, int]:
-    import affcorr
+    from affcorr_bench.eval.pose import pair_pose_error
 
-    from affcorr_bench.eval.pose import rotation_error, translation_error
-
-    keep = pair.keep(x1, x2)
-    x1, x2 = x1[keep], x2[keep]
-    if len(x1) < 5:
-        return float("inf"), len(x1)
-    try:
-        pose, _ = affcorr.estimate_relative_pose(np.c_[x1, x2], pair.K1, pair.K2, threshold=1.0)
-    except (ValueError, RuntimeError):
-        return float("inf"), len(x1)
-    return max(rotation_error(pose.R, pair.R), translation_error(pose.t, pair.t)), len(x1)
+    return pair_pose_error(pair, np.c_[x1, x2], 1.0)
 
 
 def homography_result(pair, x1, x2) -> tuple[bool, int]:

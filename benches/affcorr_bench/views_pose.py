@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from . import common
-from .eval.pose import pose_auc, rotation_error, translation_error
+from .eval.pose import pair_pose_error, pose_auc
 from .views import rotated
 
 ROTATIONS = (0, 30, 90, 135, 180)
@@ -153,16 +153,7 @@ def main(argv=None) -> None:
         for mode, pipe in pipes.items():
             t = time.perf_counter()
             res = pipe.match_pair(img1, b)
-            corrs = back_to_original(res.corrs, M)
-            keep = pp.keep(corrs[:, :2], corrs[:, 2:4])
-            corrs = corrs[keep]
-            err = float("inf")
-            if len(corrs) >= 5:
-                try:
-                    pose, _ = affcorr.estimate_relative_pose(corrs, pp.K1, pp.K2, threshold=thr)
-                    err = max(rotation_error(pose.R, pp.R), translation_error(pose.t, pp.t))
-                except (RuntimeError, ValueError):
-                    pass
+            err, kept = pair_pose_error(pp, back_to_original(res.corrs, M), thr)
             view = res.view
             rows.append(
                 dict(
@@ -170,7 +161,7 @@ def main(argv=None) -> None:
                     pair=pp.name,
                     rotation_deg=r,
                     views=mode,
-                    matches=len(corrs),
+                    matches=kept,
                     pose_error_deg=err,
                     solved=bool(err < SOLVED_DEG),
                     seconds=time.perf_counter() - t,

@@ -124,6 +124,23 @@ def translation_error(t: np.ndarray, t_gt: np.ndarray) -> float:
     return min(e, 180.0 - e)
 
 
+def pair_pose_error(pair, corrs: np.ndarray, threshold: float) -> tuple[float, int]:
+    """The pose error of ``corrs`` ((N, 8) ACs or (N, 4) points) on a calibrated ``pair`` of
+    ``pose_data``: the rows ``pair.keep`` keeps (a board pair's matches on the board), then
+    affcorr.estimate_relative_pose at ``threshold`` and max(rotation, translation direction
+    error) in degrees, inf with fewer than 5 rows or no pose; and how many rows were kept."""
+    import affcorr
+
+    corrs = corrs[pair.keep(corrs[:, :2], corrs[:, 2:4])]
+    if len(corrs) < 5:
+        return float("inf"), len(corrs)
+    try:
+        pose, _ = affcorr.estimate_relative_pose(corrs, pair.K1, pair.K2, threshold=threshold)
+    except (RuntimeError, ValueError):
+        return float("inf"), len(corrs)
+    return max(rotation_error(pose.R, pair.R), translation_error(pose.t, pair.t)), len(corrs)
+
+
 def pose_auc(errors, thresholds=AUC_DEG) -> list[float]:
     """Area under the recall-vs-error curve up to each threshold, normalised to [0, 1]
     (SuperGlue's definition; infinite errors never count as recalled)."""
