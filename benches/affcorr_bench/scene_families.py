@@ -362,6 +362,13 @@ def affcorr_candidates(problem: str) -> dict[str, tuple[str, dict]]:
         "pts-msac": ("pts", dict(scoring="msac")),
         "pts-magsac": ("pts", dict(scoring="magsac")),
     }
+    # Local optimisation's other threshold schedule (the default is "both" for H, "widening"
+    # for E and F).
+    if problem == "homography":
+        c["ac-lo-widening"] = ("ac", dict(lo_schedule="widening"))
+        c["pts-lo-widening"] = ("pts", dict(lo_schedule="widening"))
+    else:
+        c["ac-lo-both"] = ("ac", dict(lo_schedule="both"))
     if problem != "homography":
         for s in ("msac", "magsac"):
             for where in ("final", "all"):
@@ -1149,7 +1156,9 @@ def report(rows: list[dict], args, fams, meta) -> None:
         "(affine terms in the final "
         "refinement / also in local optimisation); `ptsample-msac-affall`: point samples of "
         "the ACs with the "
-        "affine terms in the refinements. Peers on the points: PoseLib, OpenCV USAC_MAGSAC "
+        "affine terms in the refinements; `-lo-widening` / `-lo-both`: local optimisation's "
+        'other threshold schedule (`lo_schedule`; the default is `"both"` for H, '
+        '`"widening"` for E and F). Peers on the points: PoseLib, OpenCV USAC_MAGSAC '
         "and USAC_ACCURATE.",
         "",
         "Cells: median rotation / translation error (degrees) for E and F (F decomposed with "

@@ -24,9 +24,9 @@ use affcorr::geom::Mat3;
 use affcorr::geom::camera::Intrinsics;
 use affcorr::ransac::problems::relpose::PoseModel;
 use affcorr::ransac::{
-    AffineRefinement, Correspondences, Estimate, EstimatorOptions, LoKind, RansacError, SampleKind,
-    SamplerKind, ScoringKind, estimate_fundamental, estimate_homography, estimate_relative_pose,
-    planar_twin,
+    AffineRefinement, Correspondences, Estimate, EstimatorOptions, LoKind, LoSchedule, RansacError,
+    SampleKind, SamplerKind, ScoringKind, estimate_fundamental, estimate_homography,
+    estimate_relative_pose, planar_twin,
 };
 use numpy::{PyArray1, PyArrayDyn};
 use pyo3::exceptions::PyValueError;
@@ -99,6 +99,7 @@ estimator_options! {
     "local_optimization" => |o, v| o.ransac.local_optimization = flag(v, "local_optimization")?;
     "lo" => |o, v| o.ransac.lo = choice(v, "lo", LOS)?;
     "lo_iterations" => |o, v| o.ransac.lo_iterations = to_usize(integer(v, "lo_iterations", MAX_LO_ITERATIONS)?);
+    "lo_schedule" => |o, v| o.ransac.lo_schedule = choice(v, "lo_schedule", LO_SCHEDULES)?;
     "final_refinement" => |o, v| o.ransac.final_refinement = flag(v, "final_refinement")?;
     "sprt" => |o, v| o.ransac.sprt = flag(v, "sprt")?;
     "affine_weight" => |o, v| o.affine_weight = if v.is_none() { None } else { Some(number(v, "affine_weight")?) };
@@ -122,6 +123,12 @@ const SAMPLERS: &[(&str, SamplerKind)] = &[
     ("prosac", SamplerKind::Prosac),
 ];
 const LOS: &[(&str, LoKind)] = &[("irls", LoKind::Irls), ("graph_cut", LoKind::GraphCut)];
+const LO_SCHEDULES: &[(&str, LoSchedule)] = &[
+    ("auto", LoSchedule::Auto),
+    ("widening", LoSchedule::Widening),
+    ("threshold", LoSchedule::Threshold),
+    ("both", LoSchedule::Both),
+];
 const SCORINGS: &[(&str, ScoringKind)] = &[
     ("auto", ScoringKind::Auto),
     ("msac", ScoringKind::Msac),

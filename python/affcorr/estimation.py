@@ -48,7 +48,16 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
                                       term + Potts spatial coherence on a grid neighbourhood
                                       of ``(x1, y1, x2, y2)``, so neighbours pull data just
                                       beyond the threshold in and push isolated ones out)
-  ``lo_iterations``      ``10``       most refits in one local optimisation
+  ``lo_iterations``      ``10``       most refits in one local optimisation (per track)
+  ``lo_schedule``        ``"auto"``   the thresholds local optimisation refits at:
+                                      ``"widening"`` (8x the threshold down to it, so a rough
+                                      minimal model still collects its inliers),
+                                      ``"threshold"`` (the threshold alone: stays on the
+                                      dominant structure when a second one lies a few pixels
+                                      off it), ``"both"`` (both from the same hypothesis, the
+                                      better score kept) or ``"auto"``: ``"both"`` for H,
+                                      ``"widening"`` for F and the relative pose
+                                      (docs/estimation.md)
   ``final_refinement``   ``True``     polish the final model on its inliers
   ``sprt``               ``True``     verify hypotheses with Wald's SPRT (random order, adaptive
                                       epsilon and delta): far fewer residuals for the same

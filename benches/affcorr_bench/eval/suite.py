@@ -36,8 +36,10 @@ MATCHES_VERSION = 1
 #: by the rotations however well it verifies (views::uncertain). 11: A's tilt-4 groups meet B's
 #: 45° rotations too. 12: a rival short of the margin wins by one plane's support
 #: (views::planar_rival). 13: a view verified weakly before the rotations ran is rivalled by
-#: them (views::rivalled_by_rotations).
-AFFCORR_PIPELINE_REVISION = 13
+#: them (views::rivalled_by_rotations). 14: the homography's local optimisation runs its
+#: widening and threshold tracks from each hypothesis, and every raw record gets one
+#: (LoSchedule::Both).
+AFFCORR_PIPELINE_REVISION = 14
 #: The Rust sources that make affcorr's matches, Cargo.lock (which pins ONNX Runtime's
 #: bindings and the rest) and the matcher's models (the shape model is in its own tag): their
 #: digest is in affcorr's cache keys too, so an experiment on the cascade that is not landed (or

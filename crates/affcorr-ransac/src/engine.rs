@@ -154,8 +154,14 @@ where
         )
     });
 
+    let schedule = options.lo_schedule.resolve(problem);
+    // With the threshold track, every raw record earns a local optimisation; see `record`.
+    let records = lo && schedule.has_threshold_track();
+
     let mut best: Option<Scored<P::Model>> = None;
     let mut best_wide_support = 0usize;
+    // The best score of a raw hypothesis (before local optimisation) so far; see `record`.
+    let mut best_raw_score = 0.0f64;
     let mut bound = options.max_iterations;
     let (mut iterations, mut lo_runs) = (0, 0);
     while iterations
@@ -177,12 +183,19 @@ where
         for model in models.drain(..) {
             let to_beat = best.as_ref().map_or(0.0, |b| b.score);
             let wide_to_beat = if lo { best_wide_support } else { usize::MAX };
+            // A raw hypothesis is scored in full if it may out-score every earlier raw one
+            // (`record`), not only the optimised best.
+            let raw_to_beat = if records {
+                to_beat.min(best_raw_score)
+            } else {
+                to_beat
+            };
             let e = match sprt.as_mut() {
                 None => score_model(
                     problem,
                     scoring,
                     &model,
-                    to_beat,
+                    raw_to_beat,
                     wide_to_beat,
                     &mut scratch,
                 ),
@@ -190,7 +203,7 @@ where
                     problem,
                     scoring,
                     &model,
-                    to_beat,
+                    raw_to_beat,
                     wide_to_beat,
                     &mut scratch,
                 ) {
@@ -206,7 +219,16 @@ where
             // it a local optimisation too.
             let promising = lo && e.wide_support > best_wide_support && e.wide_support > m;
             best_wide_support = best_wide_support.max(e.wide_support);
-            if e.score <= to_beat && !promising {
+            // The best raw hypothesis so far earns a local optimisation even when an optimised
+            // model out-scores it (LO-RANSAC's so-far-the-best rule compares raw with raw, as
+            // PoseLib does): optimisation lifts a score above any raw one's, and a model
+            // optimised into a compromise between two structures (a plane and a cluster a few
+            // pixels off it) would otherwise never be challenged by the raw samples of the
+            // better one. Only with the threshold track: the widening track takes a raw
+            // hypothesis of either structure into the compromise (docs/estimation.md).
+            let record = records && e.score > best_raw_score;
+            best_raw_score = best_raw_score.max(e.score);
+            if e.score <= to_beat && !promising && !record {
                 continue;
             }
             let mut candidate = Scored {
@@ -221,6 +243,7 @@ where
                     problem,
                     scoring,
                     candidate,
+                    schedule,
                     options,
                     &mut scratch,
                     graph.as_mut(),
@@ -311,6 +334,7 @@ where
             problem,
             scoring,
             best,
+            options.lo_schedule.resolve(problem),
             options,
             &mut scratch,
             graph.as_mut(),

@@ -75,7 +75,7 @@ pub use estimators::{
     ScoringKind, estimate_fundamental, estimate_fundamental_batch, estimate_homography,
     estimate_homography_batch, estimate_relative_pose, estimate_relative_pose_batch,
 };
-pub use options::{AffineRefinement, LoKind, RansacOptions};
+pub use options::{AffineRefinement, LoKind, LoSchedule, RansacOptions};
 pub use planar::{PLANAR_SHARE, PlanarTwin, planar_twin};
 pub use problem::Problem;
 pub use problems::{Correspondences, SampleKind};

@@ -1,5 +1,6 @@
 //! Options of the robust estimator, with their defaults.
 
+use crate::problem::Problem;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -45,6 +46,53 @@ pub enum LoKind {
     GraphCut,
 }
 
+/// The threshold schedules that local optimisation follows from a promising hypothesis.
+///
+/// The widening schedule starts at 8× the threshold, so a noisy minimal model (e.g. from two
+/// ACs) still collects the true inliers; but a second structure a few pixels off the first (a
+/// cluster of matches on a nearby surface, a matcher's local misregistration) is inside that
+/// wide band, and the fit on both is a compromise that the narrowing steps keep. A track at the
+/// threshold alone (PoseLib's LO) refits on the hypothesis's own inliers and stays on the
+/// dominant structure, but can stall where a rough hypothesis needs the wide steps. `Both` runs
+/// the two tracks from the same hypothesis and keeps the better score. A schedule with the
+/// threshold track also optimises every raw record ([`LoSchedule::has_threshold_track`]).
+/// docs/estimation.md ("Two structures a few pixels apart") has the measurements.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LoSchedule {
+    /// The problem's measured choice ([`crate::Problem::lo_schedule`]): [`LoSchedule::Both`]
+    /// for homographies (a refit is a small DLT, and the failure was measured on real data),
+    /// [`LoSchedule::Widening`] for E and F (on the scene families `Both` cost them 1.1–2.7×
+    /// the time and the one-plane pose 1.3× the error, for gains on a few families).
+    #[default]
+    Auto,
+    /// From 8× the threshold down to it, then at the threshold while the score improves.
+    Widening,
+    /// At the threshold only, while the score improves.
+    Threshold,
+    /// The widening and the threshold tracks from the same hypothesis; the better score wins.
+    Both,
+}
+
+impl LoSchedule {
+    /// The schedule itself, or `problem`'s choice for [`LoSchedule::Auto`].
+    pub fn resolve<P: Problem>(self, problem: &P) -> Self {
+        match self {
+            Self::Auto => problem.lo_schedule(),
+            chosen => chosen,
+        }
+    }
+
+    /// Whether local optimisation runs the threshold track. Then every raw hypothesis that
+    /// out-scores the earlier raw ones earns a local optimisation too (not only one that beats
+    /// the optimised best): the threshold track keeps such a hypothesis in its own basin, so a
+    /// raw hypothesis of the dominant structure can still win after local optimisation has
+    /// fitted a compromise. (With the widening track alone this changed no error on the
+    /// scene families and cost E and F 1.1–1.8× the time: docs/estimation.md.)
+    pub fn has_threshold_track(self) -> bool {
+        matches!(self, Self::Threshold | Self::Both)
+    }
+}
+
 /// Where the affine terms of ACs enter the least-squares fits of a model (AC data; point data
 /// ignore it; H refines only at the end, so `All` is `Final` there). Each AC then adds its two affine residuals, whitened by the noise
 /// scale of A that the fit estimates from its inliers (the ratio of the median point to the
@@ -87,8 +135,11 @@ pub struct RansacOptions {
     /// How local optimisation selects its data: [`LoKind::Irls`] (default) or
     /// [`LoKind::GraphCut`].
     pub lo: LoKind,
-    /// Most least-squares refits in one local optimisation. Default 10.
+    /// Most least-squares refits in one local optimisation (per track). Default 10.
     pub lo_iterations: usize,
+    /// The threshold schedules of local optimisation ([`LoSchedule`]). Default
+    /// [`LoSchedule::Auto`].
+    pub lo_schedule: LoSchedule,
     /// Polish the final model with the problem's refinement (Levenberg–Marquardt). Default true.
     pub final_refinement: bool,
     /// Verify hypotheses with Wald's sequential probability ratio test (Chum & Matas 2008):
@@ -118,6 +169,7 @@ impl Default for RansacOptions {
             local_optimization: true,
             lo: LoKind::Irls,
             lo_iterations: 10,
+            lo_schedule: LoSchedule::Auto,
             final_refinement: true,
             sprt: true,
             cancel: None,

@@ -5,6 +5,7 @@
 //! the data itself: samplers, scoring and local optimisation vary independently of the problem.
 
 use crate::loss::Loss;
+use crate::options::LoSchedule;
 use crate::refine::LmOptions;
 use affcorr_geom::Vec2;
 
@@ -107,5 +108,11 @@ pub trait Problem: Sync {
     /// fixed that scene but lost inliers on another; benches/results/ransac.md.)
     fn lo_refines(&self) -> bool {
         true
+    }
+
+    /// The threshold schedules of local optimisation under [`LoSchedule::Auto`]. Default
+    /// [`LoSchedule::Widening`].
+    fn lo_schedule(&self) -> LoSchedule {
+        LoSchedule::Widening
     }
 }
