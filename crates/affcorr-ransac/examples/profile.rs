@@ -4,14 +4,15 @@
 //! that a speed-up costs no accuracy:
 //! `cargo run --release -p affcorr-ransac --example profile -- homography affine 20`.
 //!
-//! The fourth argument changes the defaults: any of `nosprt`, `msac`, `magsac`, `graph_cut`
+//! The fourth argument changes the defaults: any of `nosprt`, `msac`, `magsac`, `graph_cut`,
+//! and one of the local-optimisation schedules `widening`, `threshold`, `both`
 //! (comma-separated).
 
 use affcorr_geom::sampson::sampson_point;
 use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
 use affcorr_geom::{Mat3, PointCorrespondence, Vec3};
 use affcorr_ransac::{
-    Correspondences, EstimatorOptions, LoKind, RansacOptions, SampleKind, ScoringKind,
+    Correspondences, EstimatorOptions, LoKind, LoSchedule, RansacOptions, SampleKind, ScoringKind,
     estimate_fundamental, estimate_homography, estimate_relative_pose,
 };
 use rand::SeedableRng;
@@ -60,6 +61,15 @@ fn main() {
                 LoKind::GraphCut
             } else {
                 LoKind::Irls
+            },
+            lo_schedule: if extra.contains("widening") {
+                LoSchedule::Widening
+            } else if extra.contains("threshold") {
+                LoSchedule::Threshold
+            } else if extra.contains("both") {
+                LoSchedule::Both
+            } else {
+                LoSchedule::Auto
             },
             ..Default::default()
         },

@@ -61,8 +61,9 @@ pub enum LoKind {
 pub enum LoSchedule {
     /// The problem's measured choice ([`crate::Problem::lo_schedule`]): [`LoSchedule::Both`]
     /// for homographies (a refit is a small DLT, and the failure was measured on real data),
-    /// [`LoSchedule::Widening`] for E and F (on the scene families `Both` cost them 1.1–2.7×
-    /// the time and the one-plane pose 1.3× the error, for gains on a few families).
+    /// [`LoSchedule::Widening`] for E and F (on the scene families `Both` cost them 1.2–2.5×
+    /// the time for median errors 0.88–1.09× the widening track's: their LO refines with
+    /// Levenberg–Marquardt).
     #[default]
     Auto,
     /// From 8× the threshold down to it, then at the threshold while the score improves.
@@ -86,8 +87,8 @@ impl LoSchedule {
     /// out-scores the earlier raw ones earns a local optimisation too (not only one that beats
     /// the optimised best): the threshold track keeps such a hypothesis in its own basin, so a
     /// raw hypothesis of the dominant structure can still win after local optimisation has
-    /// fitted a compromise. (With the widening track alone this changed no error on the
-    /// scene families and cost E and F 1.1–1.8× the time: docs/estimation.md.)
+    /// fitted a compromise. (With the widening track alone it fixed none of the cluster
+    /// scenes and cost E and F 1.1–1.8× the time: docs/estimation.md.)
     pub fn has_threshold_track(self) -> bool {
         matches!(self, Self::Threshold | Self::Both)
     }
