@@ -119,10 +119,10 @@ pub(crate) fn local_optimization<P: Problem, S: Scoring>(
                     )
                 })
                 .flatten();
-            // The linear fit at every step, beside LM: LM's few steps from a rough 2-AC model can
-            // stall in a wrong basin on real data (graffiti 1→3 with learned ACs, with the linear fit
-            // on the first step only: tests/test_pipeline.py; the errors with and without it are in
-            // benches/results/ransac.md).
+            // The linear fit at every step, beside LM: LM's few steps from a rough 2-AC model
+            // can stall in a wrong basin on real data (graffiti 1→3 with learned ACs, with the
+            // linear fit on the first step only: tests/test_pipeline.py; the errors with and
+            // without it are in benches/results/ransac.md).
             let linear = problem.fit_nonminimal(indices, Some(weights));
             let start_score = best.score;
             for model in refined.into_iter().chain(linear) {
@@ -140,8 +140,8 @@ pub(crate) fn local_optimization<P: Problem, S: Scoring>(
                 }
             }
             // Past the schedule, stop at the first step that does not improve the score by
-            // LO_MIN_GAIN: a model crawling up a long valley (typically a wrong one) is not worth
-            // more refits.
+            // LO_MIN_GAIN: a model crawling up a long valley (typically a wrong one) is not
+            // worth more refits.
             if step + 1 >= schedule.len() && best.score <= start_score * (1.0 + LO_MIN_GAIN) {
                 break;
             }
