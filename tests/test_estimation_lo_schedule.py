@@ -17,7 +17,7 @@ from affcorr_bench import scene_families as sf
 
 @pytest.fixture(scope="module")
 def cluster_scenes():
-    return sf.make_jobs(["homography"], [("cluster 20%", {"cluster": 0.2})], 12, 800)
+    return sf.make_jobs(["homography"], [("cluster 20%", {"cluster": 0.2})], 24, 800)
 
 
 def misses(jobs, **opts) -> int:
@@ -33,9 +33,10 @@ def misses(jobs, **opts) -> int:
 def test_the_homography_default_stays_on_the_plane_beside_a_cluster(cluster_scenes):
     widening = misses(cluster_scenes, lo_schedule="widening")
     default = misses(cluster_scenes)
-    # The premise: the widening schedule alone misses in a good share of the scenes.
-    assert widening >= 5, f"widening missed {widening} of 12"
-    assert default * 2 <= widening, f"default {default} vs widening {widening} of 12"
+    # The premise: the widening schedule alone misses in a good share of the scenes (14 of 24
+    # when written; the default 5).
+    assert widening >= 9, f"widening missed {widening} of 24"
+    assert default * 2 <= widening, f"default {default} vs widening {widening} of 24"
 
 
 def test_auto_is_both_for_h_and_widening_for_f_and_pose(cluster_scenes):
