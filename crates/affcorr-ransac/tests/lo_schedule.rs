@@ -3,7 +3,7 @@
 //! shifted by 5 px (a nearby surface, a matcher's local misregistration). The widening track's
 //! first steps (8× the threshold) take the cluster in and fit a compromise that the narrowing
 //! steps keep; the threshold track stays on the plane; `Both` (the homography's default) keeps
-//! the better score.
+//! the better score. Every schedule also recovers the pose and F of a multi-plane scene.
 
 use affcorr_geom::synthetic::{NoiseModel, PlaneScene, gaussian, noisy_correspondences};
 use affcorr_geom::{Mat2, Mat3, Vec2, Vec3};
@@ -13,9 +13,8 @@ use affcorr_ransac::{
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
-#[allow(dead_code)] // angle_deg: the pose tests' helper
 mod common;
-use common::transfer_error;
+use common::{angle_deg, transfer_error};
 
 /// Share of all matches moved from the outliers into the cluster.
 const CLUSTER_SHARE: f64 = 0.2;
@@ -110,5 +109,54 @@ fn auto_is_both_for_the_homography() {
         let (auto, both) = (run(LoSchedule::Auto), run(LoSchedule::Both));
         assert_eq!(auto.model, both.model);
         assert_eq!(auto.inliers, both.inliers);
+    }
+}
+
+#[test]
+fn every_schedule_recovers_the_pose_and_f_and_is_deterministic() {
+    // Three planes at 50% outliers: each schedule, forced on the relative pose and F (whose
+    // default is the widening track), finds the truth, and the same seed gives the same model.
+    use affcorr_geom::sampson::sampson_point;
+    use affcorr_ransac::{estimate_fundamental, estimate_relative_pose};
+    let mut rng = Pcg64::seed_from_u64(51);
+    for trial in 0..3 {
+        let scene = PlaneScene::random(&mut rng);
+        let noise = NoiseModel {
+            planes: 3,
+            outlier_ratio: 0.5,
+            pixel_noise: 0.5,
+            affine_noise: 0.02,
+        };
+        let (acs, is_inlier) = noisy_correspondences(&mut rng, &scene, 1000, &noise);
+        let data = Correspondences::from_acs(&acs).unwrap();
+        for schedule in [
+            LoSchedule::Widening,
+            LoSchedule::Threshold,
+            LoSchedule::Both,
+        ] {
+            let mut o = options(schedule, SampleKind::Affine, trial);
+            o.ransac.threshold = 1.5;
+            let pose = estimate_relative_pose(&data, &scene.k1, &scene.k2, &o).unwrap();
+            let r_err = angle_deg(&(pose.model.pose.r.transpose() * scene.pose.r));
+            let t_err = pose.model.pose.t.angle(&scene.pose.t).to_degrees();
+            assert!(
+                r_err < 0.5 && t_err < 3.0,
+                "{schedule:?}: {r_err}°, {t_err}°"
+            );
+            let again = estimate_relative_pose(&data, &scene.k1, &scene.k2, &o).unwrap();
+            assert_eq!(pose.model.pose.r, again.model.pose.r, "{schedule:?}");
+            let f = estimate_fundamental(&data, &o).unwrap();
+            let inliers: Vec<usize> = (0..data.len()).filter(|&i| is_inlier[i]).collect();
+            let mean = |m: &Mat3| {
+                inliers
+                    .iter()
+                    .map(|&i| sampson_point(m, &data.ac(i).points()).sqrt())
+                    .sum::<f64>()
+                    / inliers.len() as f64
+            };
+            let (got, truth) = (mean(&f.model), mean(&scene.fundamental()));
+            assert!(got < 1.2 * truth + 0.05, "{schedule:?}: {got} vs {truth}");
+            assert_eq!(f.model, estimate_fundamental(&data, &o).unwrap().model);
+        }
     }
 }
