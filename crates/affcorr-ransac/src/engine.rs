@@ -15,7 +15,7 @@
 
 use crate::error::{RansacError, Result};
 use crate::local_opt::{LoGraph, local_optimization};
-use crate::options::{AffineRefinement, Cancel, LoKind, RansacOptions};
+use crate::options::{AffineRefinement, Cancel, LoKind, LoSchedule, RansacOptions};
 use crate::problem::Problem;
 use crate::refine::LmOptions;
 use crate::sampler::Sampler;
@@ -228,9 +228,18 @@ where
             // hypothesis of either structure into the compromise (docs/estimation.md).
             let record = records && e.score > best_raw_score;
             best_raw_score = best_raw_score.max(e.score);
-            if e.score <= to_beat && !promising && !record {
+            let only_record = e.score <= to_beat && !promising;
+            if only_record && !record {
                 continue;
             }
+            // A record that is neither a new best nor promising gets the threshold track
+            // alone: its widening track goes where the best's went (on the scene families and
+            // the cluster scenes it never won; 10% of a homography's instructions).
+            let track = if only_record {
+                LoSchedule::Threshold
+            } else {
+                schedule
+            };
             let mut candidate = Scored {
                 model,
                 score: e.score,
@@ -243,7 +252,7 @@ where
                     problem,
                     scoring,
                     candidate,
-                    schedule,
+                    track,
                     options,
                     &mut scratch,
                     graph.as_mut(),

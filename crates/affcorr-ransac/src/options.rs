@@ -84,10 +84,10 @@ impl LoSchedule {
     }
 
     /// Whether local optimisation runs the threshold track. Then every raw hypothesis that
-    /// out-scores the earlier raw ones earns a local optimisation too (not only one that beats
-    /// the optimised best): the threshold track keeps such a hypothesis in its own basin, so a
-    /// raw hypothesis of the dominant structure can still win after local optimisation has
-    /// fitted a compromise. (With the widening track alone it fixed none of the cluster
+    /// out-scores the earlier raw ones earns a local optimisation on the threshold track too
+    /// (not only one that beats the optimised best): that track keeps such a hypothesis in its
+    /// own basin, so a raw hypothesis of the dominant structure can still win after local
+    /// optimisation has fitted a compromise. (With the widening track alone it fixed none of the cluster
     /// scenes and cost E and F 1.1–1.8× the time: docs/estimation.md.)
     pub fn has_threshold_track(self) -> bool {
         matches!(self, Self::Threshold | Self::Both)
