@@ -61,8 +61,8 @@ pub enum LoKind {
 pub enum LoSchedule {
     /// The problem's measured choice ([`crate::Problem::lo_schedule`]): [`LoSchedule::Both`]
     /// for homographies (a refit is a small DLT, and the failure was measured on real data),
-    /// [`LoSchedule::Widening`] for E and F (on the scene families `Both` cost them 1.2–2.5×
-    /// the time for median errors 0.88–1.09× the widening track's: their LO refines with
+    /// [`LoSchedule::Widening`] for E and F (on the scene families `Both` cost them 1.1–2.0×
+    /// the time for median errors 0.88–1.05× the widening track's: their LO refines with
     /// Levenberg–Marquardt).
     #[default]
     Auto,
