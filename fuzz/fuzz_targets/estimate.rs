@@ -16,8 +16,8 @@ use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
 use affcorr_geom::types::AcRow;
 use affcorr_geom::{Mat2, Vec2};
 use affcorr_ransac::{
-    BatchOptions, Correspondences, Estimate, EstimatorOptions, RansacOptions, Result, SampleKind,
-    SamplerKind, ScoringKind, estimate_fundamental, estimate_fundamental_batch,
+    BatchOptions, Correspondences, Estimate, EstimatorOptions, LoSchedule, RansacOptions, Result,
+    SampleKind, SamplerKind, ScoringKind, estimate_fundamental, estimate_fundamental_batch,
     estimate_homography, estimate_homography_batch, estimate_relative_pose,
     estimate_relative_pose_batch,
 };
@@ -114,6 +114,12 @@ fn options(r: &mut Reader, n: usize) -> EstimatorOptions {
         seed: r.u64(),
         local_optimization: r.bool(),
         lo_iterations: usize::from(r.u8() % 12),
+        lo_schedule: [
+            LoSchedule::Auto,
+            LoSchedule::Widening,
+            LoSchedule::Threshold,
+            LoSchedule::Both,
+        ][usize::from(r.u8() % 4)],
         final_refinement: r.bool(),
         sprt: r.bool(),
         ..Default::default()
