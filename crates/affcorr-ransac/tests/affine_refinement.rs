@@ -2,7 +2,6 @@
 //! confidence (`EstimatorOptions::affine_confidence`): accuracy against ground truth, poor ACs
 //! never worse than points, and typed errors for bad confidences.
 
-#[allow(dead_code)]
 mod common;
 
 use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};

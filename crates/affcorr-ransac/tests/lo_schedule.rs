@@ -14,7 +14,7 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
 mod common;
-use common::{angle_deg, transfer_error};
+use common::{Noisy, angle_deg, make_data, transfer_error};
 
 /// Share of all matches moved from the outliers into the cluster.
 const CLUSTER_SHARE: f64 = 0.2;
@@ -121,14 +121,7 @@ fn every_schedule_recovers_the_pose_and_f_and_is_deterministic() {
     let mut rng = Pcg64::seed_from_u64(51);
     for trial in 0..3 {
         let scene = PlaneScene::random(&mut rng);
-        let noise = NoiseModel {
-            planes: 3,
-            outlier_ratio: 0.5,
-            pixel_noise: 0.5,
-            affine_noise: 0.02,
-        };
-        let (acs, is_inlier) = noisy_correspondences(&mut rng, &scene, 1000, &noise);
-        let data = Correspondences::from_acs(&acs).unwrap();
+        let Noisy { data, is_inlier } = make_data(&mut rng, &scene, 3, 1000, 0.5, 0.5, 0.02);
         for schedule in [
             LoSchedule::Widening,
             LoSchedule::Threshold,

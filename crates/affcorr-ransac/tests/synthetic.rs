@@ -4,7 +4,7 @@
 //! truth; we add pixel noise to x2, relative noise to A, and replace a fraction of the
 //! correspondences by random ones.
 
-use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
+use affcorr_geom::synthetic::PlaneScene;
 use affcorr_ransac::{
     Correspondences, EstimatorOptions, LoKind, RansacError, RansacOptions, SampleKind, SamplerKind,
     estimate_fundamental, estimate_homography, estimate_relative_pose,
@@ -13,35 +13,7 @@ use rand::SeedableRng;
 use rand_pcg::Pcg64;
 
 mod common;
-use common::{angle_deg, transfer_error};
-
-struct Noisy {
-    data: Correspondences,
-    is_inlier: Vec<bool>,
-}
-
-/// ACs from `planes` planes of `scene`'s cameras, with noise and outliers.
-fn make_data(
-    rng: &mut Pcg64,
-    scene: &PlaneScene,
-    planes: usize,
-    n: usize,
-    outlier_ratio: f64,
-    pixel_noise: f64,
-    affine_noise: f64,
-) -> Noisy {
-    let noise = NoiseModel {
-        planes,
-        outlier_ratio,
-        pixel_noise,
-        affine_noise,
-    };
-    let (acs, is_inlier) = noisy_correspondences(rng, scene, n, &noise);
-    Noisy {
-        data: Correspondences::from_acs(&acs).unwrap(),
-        is_inlier,
-    }
-}
+use common::{angle_deg, make_data, transfer_error};
 
 fn recall(truth: &[bool], found: &[bool]) -> f64 {
     let tp = truth.iter().zip(found).filter(|(t, f)| **t && **f).count();
