@@ -47,6 +47,9 @@ def test_auto_is_both_for_h_and_widening_for_f_and_pose(cluster_scenes):
     assert same(h(), h(lo_schedule="both")) and same(h(), h(lo_schedule="auto"))
     f = lambda **o: affcorr.estimate_fundamental(c, threshold=2.0, **o)  # noqa: E731
     assert same(f(), f(lo_schedule="widening"))
+    pose = lambda **o: affcorr.estimate_relative_pose(c, sc["K1"], sc["K2"], threshold=2.0, **o)  # noqa: E731
+    (a, ia), (b, ib) = pose(), pose(lo_schedule="widening")
+    assert np.array_equal(a.R, b.R) and np.array_equal(ia.inliers, ib.inliers)
     # Upper case is accepted, as for every named option.
     assert same(f(lo_schedule="BOTH"), f(lo_schedule="both"))
 
