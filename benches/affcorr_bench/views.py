@@ -2,6 +2,7 @@
 
     .venv/bin/python -m affcorr_bench.views [--images 1] [--max-keypoints 1024] [--threads 2]
         [--families rotation,zoom,zoomset] [--zoom-seeds 4] [--relative-budget default|none|K]
+        [--matcher NAME] [--no-refine-affine]
 
 Pairs: experiment 1's (affcorr_bench.eval.data.hpatches_pairs: graffiti 1->3 plus viewpoint and
 illumination sequences of held-out images, exact H), each with image B rotated about its centre
@@ -13,7 +14,8 @@ each held-out image's first viewpoint target) zoomed ``--zoom-seeds`` times by a
 in 2-6x into a random centre, of A or of B (``zoom_set``). H follows each warp exactly.
 
 Each pair runs through affcorr.Pipeline twice, with views="off" and views="auto" (everything
-else the defaults but max_keypoints and threads), then affcorr's 2-AC homography RANSAC at the
+else the defaults but max_keypoints, threads and, where given, the matcher and
+refine_affine), then affcorr's 2-AC homography RANSAC at the
 pipeline's threshold. Success: the mean distance between the estimated and the true H's images
 of image A's pixels seen in both views is below 10 px (affcorr_bench.eval.extreme's measure).
 Reported per transformation: pairs solved with and without views, the median time per pair,
@@ -164,6 +166,15 @@ def main(argv=None) -> None:
         default="default",
         help="the cascade's view_relative_budget: 'default', 'none' or a number",
     )
+    p.add_argument(
+        "--matcher", default=None, help="the pipeline's matcher (default: the pipeline's default)"
+    )
+    p.add_argument(
+        "--refine-affine",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="the pipeline's refine_affine (default: the pipeline's default)",
+    )
     p.add_argument("--out", default=str(common.RESULTS / "views"))
     args = p.parse_args(argv)
 
@@ -176,8 +187,14 @@ def main(argv=None) -> None:
     )
     if args.relative_budget.lower() not in ("default", "none"):
         budget = float(args.relative_budget)
+    matcher = args.matcher or PIPELINE_DEFAULTS["matcher"]
+    refine = (
+        PIPELINE_DEFAULTS["refine_affine"] if args.refine_affine is None else args.refine_affine
+    )
     pipes = {
         mode: affcorr.Pipeline(
+            matcher,
+            refine_affine=refine,
             max_keypoints=args.max_keypoints,
             threads=args.threads,
             views=mode,
@@ -248,8 +265,9 @@ def main(argv=None) -> None:
         f"Command: `{common.command(__spec__.name)}`",
         "",
         f"Date: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}. affcorr "
-        f"{affcorr.__version__}; matcher {PIPELINE_DEFAULTS['matcher']} at "
-        f"{args.max_keypoints} keypoints, {args.threads} threads; homography threshold {thr} "
+        f"{affcorr.__version__}; matcher {matcher} at "
+        f"{args.max_keypoints} keypoints, {args.threads} threads; refine_affine {refine}; "
+        f"homography threshold {thr} "
         f"px; view_relative_budget {budget}. {len(all_cases)} cases in "
         f"{time.time() - t0:.0f} s; load average at the end "
         f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} on 2 cores.",

@@ -103,6 +103,12 @@ def main(argv=None) -> None:
     )
     p.add_argument("--modes", default="off,auto", help="comma-separated views modes")
     p.add_argument(
+        "--refine-affine",
+        action=argparse.BooleanOptionalAction,
+        default=None,
+        help="the pipeline's refine_affine (default: the pipeline's default)",
+    )
+    p.add_argument(
         "--board-only",
         action="store_true",
         help="only the chessboard's moving-board pairs, each image blanked outside the board",
@@ -135,9 +141,16 @@ def main(argv=None) -> None:
     matcher = args.matcher or PIPELINE_DEFAULTS["matcher"]
     rotations = [int(r) for r in args.rotations.split(",") if r.strip()]
     modes = [m.strip() for m in args.modes.split(",") if m.strip()]
+    refine = (
+        PIPELINE_DEFAULTS["refine_affine"] if args.refine_affine is None else args.refine_affine
+    )
     pipes = {
         mode: affcorr.Pipeline(
-            matcher=matcher, max_keypoints=args.max_keypoints, threads=args.threads, views=mode
+            matcher=matcher,
+            max_keypoints=args.max_keypoints,
+            threads=args.threads,
+            views=mode,
+            refine_affine=refine,
         )
         for mode in modes
     }
@@ -202,7 +215,8 @@ def main(argv=None) -> None:
         "",
         f"Date: {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}. affcorr "
         f"{affcorr.__version__}; matcher {matcher} at "
-        f"{args.max_keypoints} keypoints, {args.threads} threads; pose threshold {thr} px. "
+        f"{args.max_keypoints} keypoints, {args.threads} threads; refine_affine {refine}; "
+        f"pose threshold {thr} px. "
         f"{len(cases)} cases in {time.time() - t0:.0f} s; load average at the end "
         f"{load[0]:.1f} / {load[1]:.1f} / {load[2]:.1f} on 2 cores.",
         "",
