@@ -248,7 +248,9 @@ class Pipeline:
             (:func:`affcorr.refine_affine` with its defaults; x2 moves too). On by default; its
             effect is measured in benches/results/eval/affine.md and
             benches/results/pose_refine.md. It costs a few times the shape network (timed as
-            ``affine_refine``); ``False`` gives the network's ACs alone.
+            ``affine_refine``); ``False`` gives the network's ACs alone (the view cascade then
+            weighs their A less when it verifies a pass; for repetitive patterns at large
+            rotations keep it on: docs/pipeline.md, "Without the refinement").
         drop_unreliable: return only the ACs flagged reliable (:attr:`MatchResult.reliable`),
             for callers that need trustworthy A (default False: every AC, each flagged).
         guided_matching: when the pair's matches verify, predict every unmatched keypoint of

@@ -34,7 +34,7 @@ use crate::views::{
     CONFIDENT_VIEW, REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec,
     WEAK_RATIO, WorkMeter, cascade_steps, guided_view, planar_rival, planar_support,
     refinement_view, rival_views, rivalled_by_rotations, screen, screen_run, uncertain,
-    verified_fundamental, verify, weak_yield,
+    verified_fundamental, verify, verify_affine_weight, weak_yield,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -226,6 +226,12 @@ impl Pipeline {
     /// The affine refinement's options (`None` when it is off).
     pub fn affine_refinement(&self) -> Option<&AffineRefineOptions> {
         self.affine_refinement.as_ref()
+    }
+
+    /// The view cascade's affine weight in verification, for this pipeline's ACs
+    /// (`views::verify_affine_weight`).
+    fn verify_weight(&self) -> f64 {
+        verify_affine_weight(self.affine_refinement.is_some())
     }
 
     /// The shape network.
@@ -599,7 +605,7 @@ impl Pipeline {
         features_a: &ImageFeatures,
         options: &GrowOptions,
     ) -> Result<WorkMatches> {
-        let Some((f, mask)) = verified_fundamental(&work.corrs)? else {
+        let Some((f, mask)) = verified_fundamental(&work.corrs, self.verify_weight())? else {
             return Ok(work);
         };
         let o = &self.views;
@@ -742,7 +748,7 @@ impl Pipeline {
         let passes = |inliers: usize, n: usize| {
             inliers >= o.min_inliers && inliers as f64 >= o.min_inlier_ratio * n as f64
         };
-        let (inliers, mask) = verify(&plain.corrs)?;
+        let (inliers, mask) = verify(&plain.corrs, self.verify_weight())?;
         meter.verification();
         let verified = passes(inliers, plain.corrs.len());
         let mut reports = vec![ViewReport {
@@ -933,7 +939,7 @@ impl Pipeline {
                 .iter()
                 .filter_map(|row| ac_from_views(row, &wa, &wb))
                 .collect();
-            let (inliers, mask) = verify(&corrs)?;
+            let (inliers, mask) = verify(&corrs, self.verify_weight())?;
             store.meter.verification();
             let verified = passes(inliers, corrs.len());
             let agreeing: Vec<[f64; 8]> = corrs

@@ -167,6 +167,39 @@ fn an_easy_pair_runs_no_synthetic_view() {
 }
 
 #[test]
+fn without_the_refinement_an_easy_pair_runs_no_synthetic_view_and_keeps_the_networks_acs() {
+    // The network's A fails the refined ACs' affine check for about half of this pair's
+    // matches; verification weighs it less (`views::VERIFY_AFFINE_WEIGHT_NETWORK`), so the
+    // pass verifies strongly.
+    let unrefined = |mode| {
+        common::init();
+        Pipeline::builder()
+            .max_keypoints(1024)
+            .models_dir(common::models_dir())
+            .threads(2)
+            .affine_refinement(None)
+            .views(affcorr_pipeline::ViewOptions {
+                mode,
+                ..Default::default()
+            })
+            .build()
+            .unwrap()
+    };
+    let (a, b, _) = graffiti();
+    let m = unrefined(ViewMode::Auto).match_pair(&a, &b).unwrap();
+    assert_eq!(m.views.len(), 1, "{:?}", m.views);
+    let plain = &m.views[0];
+    assert!(plain.verified && plain.used && plain.view == ViewSpec::PLAIN);
+    assert!(
+        plain.inliers as f64 >= affcorr_pipeline::views::WEAK_RATIO * plain.matches as f64,
+        "{plain:?}"
+    );
+    // The ACs returned are the network's, as with the cascade off.
+    let off = unrefined(ViewMode::Off).match_pair(&a, &b).unwrap();
+    assert_eq!(off.corrs, m.corrs);
+}
+
+#[test]
 fn a_6x_zoom_off_centre_is_solved_through_a_magnified_tile() {
     let (a, b, h) = graffiti();
     // A′ = the 133 × 107 part of A around (560, 220) (off the centre), enlarged 6×:
