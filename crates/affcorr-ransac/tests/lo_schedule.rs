@@ -6,7 +6,7 @@
 //! the better score. Every schedule also recovers the pose and F of a multi-plane scene.
 
 use affcorr_geom::synthetic::{NoiseModel, PlaneScene, gaussian, noisy_correspondences};
-use affcorr_geom::{Mat2, Mat3, Vec2, Vec3};
+use affcorr_geom::{Mat2, Mat3, Vec2};
 use affcorr_ransac::{
     Correspondences, EstimatorOptions, LoSchedule, RansacOptions, SampleKind, estimate_homography,
 };
@@ -33,7 +33,6 @@ fn plane_with_cluster(rng: &mut Pcg64, scene: &PlaneScene) -> Correspondences {
     };
     let n = 800;
     let (mut acs, is_inlier) = noisy_correspondences(rng, scene, n, &noise);
-    let h = scene.homography();
     let angle = rng.random_range(0.0..std::f64::consts::TAU);
     let shift = Vec2::new(angle.cos(), angle.sin()) * CLUSTER_SHIFT;
     let wanted = (CLUSTER_SHARE * n as f64) as usize;
@@ -44,15 +43,10 @@ fn plane_with_cluster(rng: &mut Pcg64, scene: &PlaneScene) -> Correspondences {
         let exact = scene.correspondence(&x1).expect("the plane is visible");
         let jitter = Mat2::new(gaussian(rng), gaussian(rng), gaussian(rng), gaussian(rng));
         acs[i].x1 = x1;
-        acs[i].x2 = project(&h, &x1) + shift + Vec2::new(gaussian(rng), gaussian(rng)) * 0.5;
+        acs[i].x2 = exact.x2 + shift + Vec2::new(gaussian(rng), gaussian(rng)) * 0.5;
         acs[i].a = exact.a + exact.a * jitter * 0.02;
     }
     Correspondences::from_acs(&acs).unwrap()
-}
-
-fn project(h: &Mat3, x: &Vec2) -> Vec2 {
-    let p = h * Vec3::new(x.x, x.y, 1.0);
-    p.xy() / p.z
 }
 
 fn options(schedule: LoSchedule, kind: SampleKind, seed: u64) -> EstimatorOptions {
