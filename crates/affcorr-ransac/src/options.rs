@@ -87,8 +87,8 @@ impl LoSchedule {
     /// out-scores the earlier raw ones earns a local optimisation on the threshold track too
     /// (not only one that beats the optimised best): that track keeps such a hypothesis in its
     /// own basin, so a raw hypothesis of the dominant structure can still win after local
-    /// optimisation has fitted a compromise. (With the widening track alone it fixed none of the cluster
-    /// scenes and cost E and F 1.1–1.8× the time: docs/estimation.md.)
+    /// optimisation has fitted a compromise. (With the widening track alone it fixed none of
+    /// the cluster scenes and cost E and F 1.1–1.8× the time: docs/estimation.md.)
     pub fn has_threshold_track(self) -> bool {
         matches!(self, Self::Threshold | Self::Both)
     }
