@@ -50,6 +50,23 @@ pub fn rival_certainty(matcher: Matcher) -> Option<f64> {
     }
 }
 
+/// The share of a plain pass's matches that must verify for it to verify strongly
+/// ([`crate::views`]; under it the rotated views rival the pass): [`crate::views::WEAK_RATIO`],
+/// and [`XFEAT_MNN_WEAK_RATIO`] for XFeat's mutual nearest neighbours.
+pub fn weak_ratio(matcher: Matcher) -> f64 {
+    match matcher {
+        Matcher::XFeatMnn => XFEAT_MNN_WEAK_RATIO,
+        _ => crate::views::WEAK_RATIO,
+    }
+}
+
+/// [`weak_ratio`] of XFeat (mutual nearest neighbours), whose correct plain passes keep many
+/// outliers: at [`crate::views::WEAK_RATIO`] a third of the rendered scenes' correct passes
+/// and most of the stereo and board views' verified weakly and paid for the rotated rivals.
+/// At 0.4 the easy pairs cost their plain pass and the rotated sets keep their pairs but one
+/// (docs/pipeline.md, "XFeat's mutual nearest neighbours verify strongly at 0.4").
+pub const XFEAT_MNN_WEAK_RATIO: f64 = 0.4;
+
 /// [`rival_certainty`] of XFeat + LighterGlue.
 pub const XFEAT_LIGHTERGLUE_RIVAL_CERTAINTY: f64 = 0.35;
 

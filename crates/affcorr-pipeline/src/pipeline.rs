@@ -32,9 +32,9 @@ use crate::result::{Estimated, Matches, Timings};
 use crate::source::ImageSource;
 use crate::views::{
     CONFIDENT_VIEW, REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewOptions, ViewReport, ViewSpec,
-    WEAK_RATIO, WorkMeter, cascade_steps, guided_view, planar_rival, planar_support,
-    refinement_view, rival_views, rivalled_by_rotations, screen, screen_run, uncertain,
-    verified_fundamental, verify, verify_affine_weight, weak_yield,
+    WorkMeter, cascade_steps, guided_view, planar_rival, planar_support, refinement_view,
+    rival_views, rivalled_by_rotations, screen, screen_run, uncertain, verified_fundamental,
+    verify, verify_affine_weight, weak_yield,
 };
 
 /// The most pixels the XFeat matchers take at the working resolution. Their memory grows with
@@ -765,11 +765,12 @@ impl Pipeline {
         // pass's): a view's work is what was spent since.
         let mut reported = meter.spent;
         // A weak verification (few of the matches agree) may be a repetitive pattern matched
-        // at the wrong rotation: the rotated views are its rivals (see `views::WEAK_RATIO`).
+        // at the wrong rotation: the rotated views are its rivals (see `defaults::weak_ratio`).
         // So may one verified by few inliers (`views::WEAK_YIELD`), or by matches the
         // matcher is unsure of (`views::uncertain`).
         let weak = verified
-            && ((inliers as f64) < WEAK_RATIO * plain.corrs.len() as f64
+            && ((inliers as f64)
+                < crate::defaults::weak_ratio(self.matcher()) * plain.corrs.len() as f64
                 || weak_yield(inliers, self.max_keypoints())
                 || uncertain(
                     &plain.certainty,

@@ -166,6 +166,48 @@ fn an_easy_pair_runs_no_synthetic_view() {
     assert!(off.views.is_empty() && off.timings.views.is_zero());
 }
 
+/// `img` with Gaussian noise of standard deviation `sigma` (gray values in [0, 1]), clamped.
+fn noisy(img: &GrayImage, sigma: f64, seed: u64) -> GrayImage {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let data = img
+        .data()
+        .iter()
+        .map(|&v| {
+            // Box–Muller.
+            let (u, w): (f64, f64) = (rng.random::<f64>().max(f64::MIN_POSITIVE), rng.random());
+            let n = (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * w).cos();
+            (v as f64 + sigma * n).clamp(0.0, 1.0) as f32
+        })
+        .collect();
+    GrayImage::new(img.width(), img.height(), data).unwrap()
+}
+
+#[test]
+fn xfeats_mutual_nearest_neighbours_verify_a_noisy_easy_pair_strongly() {
+    // Graffiti with B noisy: XFeat's mutual nearest neighbours keep many outliers, and the
+    // correct plain pass verifies by a share under `views::WEAK_RATIO` (0.58 when written).
+    // For this matcher that share is strong (`defaults::weak_ratio`): no synthetic view runs.
+    let (a, b, gt) = graffiti();
+    let b = noisy(&b, 30.0 / 255.0, 0);
+    let p = common::matcher_pipeline(Matcher::XFeatMnn, ViewMode::Auto, false);
+    let est = p
+        .homography(&a, &b, &Geometry::Homography.default_options())
+        .unwrap();
+    let views = &est.matches.views;
+    assert_eq!(views.len(), 1, "{views:?}");
+    let plain = &views[0];
+    assert!(plain.view == ViewSpec::PLAIN && plain.verified && plain.used);
+    let share = plain.inliers as f64 / plain.matches as f64;
+    assert!(
+        share < affcorr_pipeline::views::WEAK_RATIO
+            && share >= affcorr_pipeline::defaults::weak_ratio(Matcher::XFeatMnn),
+        "the noise no longer makes the share fall between the two ratios: {plain:?}"
+    );
+    let err = corner_error(&est.estimate.model, &gt, a.width(), a.height());
+    assert!(err < 5.0, "corner error {err} px");
+}
+
 #[test]
 fn without_the_refinement_an_easy_pair_runs_no_synthetic_view_and_keeps_the_networks_acs() {
     // The network's A fails the refined ACs' affine check for about half of this pair's
