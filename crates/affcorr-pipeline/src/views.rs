@@ -10,7 +10,8 @@
 //!    rather than H, so that non-planar scenes verify. Points alone are not enough: a few
 //!    dozen wrong matches of a rotated pair often fit some F within 2 px, while their ACs
 //!    rarely fit it (benches/results/views.md has the measurement).
-//!    A pass that verifies only weakly (under [`WEAK_RATIO`] of its matches agree, or fewer
+//!    A pass that verifies only weakly (under [`WEAK_RATIO`] of its matches agree, the
+//!    matcher's share of [`crate::defaults::weak_ratio`], or fewer
 //!    inliers than [`WEAK_YIELD`] of the keypoint budget: a repetitive pattern matched at
 //!    the wrong rotation looks like this; or whose matches' median certainty is low: a
 //!    repetitive pattern matched a quarter turn off can agree almost wholly with one F, and
@@ -120,7 +121,9 @@ pub const VERIFY_THRESHOLD: f64 = 2.0;
 /// a repetitive pattern (a chessboard, a facade) a rotated pair's wrong matches often agree
 /// with some F, and in auto mode the rotated views ([`rival_views`]) are tried as rivals. On
 /// the chessboard stereo pairs with B rotated (benches/results/views_pose.md) the wrong
-/// rotation's share was 0.16–0.55, the right one's 0.37–0.93.
+/// rotation's share was 0.16–0.55, the right one's 0.37–0.93. XFeat's mutual nearest
+/// neighbours, whose correct passes keep many outliers, have their own
+/// ([`crate::defaults::weak_ratio`]).
 pub const WEAK_RATIO: f64 = 0.6;
 
 /// A rival view replaces a weakly verified plain pair only with this many times its inliers
