@@ -9,6 +9,7 @@
 
 mod common;
 
+use affcorr_geom::synthetic::gaussian;
 use affcorr_geom::{Mat3, Vec3};
 use affcorr_image::{AffineWarp, GrayImage, warp_image};
 use affcorr_pipeline::views::screen;
@@ -168,17 +169,12 @@ fn an_easy_pair_runs_no_synthetic_view() {
 
 /// `img` with Gaussian noise of standard deviation `sigma` (gray values in [0, 1]), clamped.
 fn noisy(img: &GrayImage, sigma: f64, seed: u64) -> GrayImage {
-    use rand::{Rng, SeedableRng};
+    use rand::SeedableRng;
     let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let data = img
         .data()
         .iter()
-        .map(|&v| {
-            // Box–Muller.
-            let (u, w): (f64, f64) = (rng.random::<f64>().max(f64::MIN_POSITIVE), rng.random());
-            let n = (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * w).cos();
-            (v as f64 + sigma * n).clamp(0.0, 1.0) as f32
-        })
+        .map(|&v| (v as f64 + sigma * gaussian(&mut rng)).clamp(0.0, 1.0) as f32)
         .collect();
     GrayImage::new(img.width(), img.height(), data).unwrap()
 }
