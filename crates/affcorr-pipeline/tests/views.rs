@@ -210,16 +210,8 @@ fn without_the_refinement_an_easy_pair_runs_no_synthetic_view_and_keeps_the_netw
     // matches; verification weighs it less (`views::VERIFY_AFFINE_WEIGHT_NETWORK`), so the
     // pass verifies strongly.
     let unrefined = |mode| {
-        common::init();
-        Pipeline::builder()
-            .max_keypoints(1024)
-            .models_dir(common::models_dir())
-            .threads(2)
+        common::matcher_builder(Matcher::XFeatLighterGlue, mode, false)
             .affine_refinement(None)
-            .views(affcorr_pipeline::ViewOptions {
-                mode,
-                ..Default::default()
-            })
             .build()
             .unwrap()
     };

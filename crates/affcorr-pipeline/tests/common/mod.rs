@@ -28,6 +28,15 @@ pub fn matcher_pipeline(
     views: affcorr_pipeline::ViewMode,
     guided: bool,
 ) -> affcorr_pipeline::Pipeline {
+    matcher_builder(matcher, views, guided).build().unwrap()
+}
+
+/// The builder of [`matcher_pipeline`], for a test that changes one more option.
+pub fn matcher_builder(
+    matcher: affcorr_pipeline::Matcher,
+    views: affcorr_pipeline::ViewMode,
+    guided: bool,
+) -> affcorr_pipeline::PipelineBuilder {
     init();
     affcorr_pipeline::Pipeline::builder()
         .matcher(matcher)
@@ -39,8 +48,6 @@ pub fn matcher_pipeline(
             ..Default::default()
         })
         .guided_matching(guided.then(affcorr_pipeline::GrowOptions::default))
-        .build()
-        .unwrap()
 }
 
 /// |H(x1) − x2| and ‖A − A_gt‖_F of an AC row against the plane-induced AC of `h` at x1
