@@ -81,6 +81,68 @@ def test_the_paired_ratio_compares_methods_scene_by_scene():
     assert sf.paired_ratio(rows, "relpose", "hard", "ac-auto", "pts-auto") is None
 
 
+def test_the_interval_of_the_ratio_to_the_best_peer_resamples_the_seeds():
+    def row(method, seed, e1, e2, problem="relpose"):
+        return dict(problem=problem, family="base", method=method, seed=seed, err1=e1, err2=e2)
+
+    # Exactly twice the best peer on every scene: no resample can move the ratio; the worse
+    # peer does not count.
+    rows = [row("ac-auto", k, 0.2 * (k + 1), 0.2 * (k + 1)) for k in range(10)]
+    rows += [row("poselib", k, 0.1 * (k + 1), 0.1 * (k + 1)) for k in range(10)]
+    rows += [row("opencv-USAC_MAGSAC", k, 0.5 * (k + 1), 0.5 * (k + 1)) for k in range(10)]
+    lo, hi = sf.best_peer_interval(rows, "relpose", "base", "ac-auto")
+    assert lo == pytest.approx(2.0) and hi == pytest.approx(2.0)
+    # Scenes that disagree: the interval holds the full sample's ratio and has width.
+    rng = np.random.default_rng(1)
+    noisy = [
+        row(m, k, *rng.lognormal(0.0, 0.8, 2)) for k in range(24) for m in ("ac-auto", "poselib")
+    ]
+    lo, hi = sf.best_peer_interval(noisy, "relpose", "base", "ac-auto")
+    med = sf.medians([r | dict(ms=0.0, failed=False) for r in noisy])
+    point = sf.score(med[("relpose", "base", "ac-auto")], "relpose") / sf.score(
+        med[("relpose", "base", "poselib")], "relpose"
+    )
+    assert lo < point < hi and hi / lo > 1.2
+    # H: the transfer error alone.
+    h = [row("ac-auto", k, 3.0, 100.0, "homography") for k in range(5)]
+    h += [row("poselib", k, 1.0, 1.0, "homography") for k in range(5)]
+    assert sf.best_peer_interval(h, "homography", "base", "ac-auto") == pytest.approx((3.0, 3.0))
+    # No peer on the family's scenes: no interval.
+    assert sf.best_peer_interval(rows[:10], "relpose", "base", "ac-auto") is None
+
+
+def test_the_auc_difference_on_real_pairs_comes_with_its_interval():
+    inf = float("inf")
+    a = [1.0, 2.0, 3.0, inf]
+    # The same errors: no difference in any resample.
+    assert sf.auc_difference(a, a, 10) == (0.0, 0.0, 0.0)
+    # Halved errors and a failure turned into 4 deg: the point difference is the AUCs', and the
+    # resamples spread around it.
+    b = [0.5, 1.0, 1.5, 4.0]
+    diff, lo, hi = sf.auc_difference(b, a, 10)
+    assert diff == pytest.approx(sf._auc(b, 10) - sf._auc(a, 10)) and diff > 0
+    assert lo < diff < hi
+    with pytest.raises(ValueError, match="the same pairs, got 4 and 3"):
+        sf.auc_difference(a, a[:3], 10)
+
+
+def test_the_plot_of_the_default_against_the_best_peer_needs_a_peer(tmp_path):
+    rows = [
+        dict(problem="relpose", family=f, method=m, seed=k, err1=e, err2=e, ms=1.0, failed=False)
+        for f in ("base", "narrow")
+        for k in range(6)
+        for m, e in (("ac-auto", 0.1 * (k + 1)), ("poselib", 0.12 * (k + 1)))
+    ]
+    fams = [f for f in sf.FAMILIES if f[0] in ("base", "narrow")]
+    path = tmp_path / "vs_peer.png"
+    assert sf.plot_vs_peer(sf.medians(rows), rows, ["relpose"], fams, path)
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    alone = [r for r in rows if r["method"] == "ac-auto"]
+    other = tmp_path / "none.png"
+    assert not sf.plot_vs_peer(sf.medians(alone), alone, ["relpose"], fams, other)
+    assert not other.exists()
+
+
 def test_a_selection_of_families_gets_the_scenes_of_the_full_run():
     # Scenes are seeded by the family's place in FAMILIES, so `--families` reproduces the
     # full run's scenes and its rows can be compared with the full table.

@@ -751,6 +751,26 @@ def _auc(errors: list[float], limit: float) -> float:
     return float(100 * np.sum(np.diff(x) * y) / limit)
 
 
+#: Bootstrap resamples (of the seeds, or of the real pairs) behind the 90% intervals of the
+#: reports: the ratio of the default to the best peer, the AUC difference to points.
+BOOTSTRAP_RESAMPLES = 2000
+#: The intervals' coverage: the 5th and 95th percentiles of the resampled statistic.
+BOOTSTRAP_PERCENTILES = (5.0, 95.0)
+
+
+def auc_difference(a: list[float], b: list[float], limit: float, seed: int = 0):
+    """AUC@``limit`` of errors ``a`` minus that of ``b`` (the same pairs, in order) and its 90%
+    bootstrap interval (:data:`BOOTSTRAP_RESAMPLES` draws of the pairs with replacement, the
+    same draw for both): how far a difference on a few dozen real pairs is from chance."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    if len(a) != len(b) or not len(a):
+        raise ValueError(f"a and b must be errors of the same pairs, got {len(a)} and {len(b)}")
+    draws = np.random.default_rng(seed).integers(0, len(a), (BOOTSTRAP_RESAMPLES, len(a)))
+    diffs = [_auc(a[d], limit) - _auc(b[d], limit) for d in draws]
+    lo, hi = np.percentile(diffs, BOOTSTRAP_PERCENTILES)
+    return _auc(a, limit) - _auc(b, limit), float(lo), float(hi)
+
+
 def planar_twin(corrs: np.ndarray, pair) -> tuple[np.ndarray, np.ndarray] | None:
     """The other pose that a single plane's matches explain as well as the true one: (R, unit t)
     or None (no homography, or one physically valid decomposition only).
@@ -881,6 +901,34 @@ def real_pairs(args) -> int:
                 + [f"{np.median(e):.3g}"]
             )
     lines += common.md_table(["set", "method", "pairs", "AUC@5", "AUC@10", "AUC@20", "med."], table)
+    lines += [
+        "",
+        f"## `{DEFAULT}` against `{POINTS_OF_DEFAULT}` pair by pair",
+        "",
+        "Issue 22 asks the default for at least 2 AUC@10 above points on the same matches of "
+        "the real pairs. The difference of AUC@10 with its 90% bootstrap interval (the pairs "
+        "resampled with replacement, the same draw for both methods), and the pairs where "
+        "the default's error is lower / higher than points' by more than 10%:",
+        "",
+    ]
+    rows = []
+    for d in sets:
+        a, b = errs[(d, DEFAULT)], errs[(d, POINTS_OF_DEFAULT)]
+        diff, lo, hi = auc_difference(a, b, 10)
+        # A failure (infinite error) is higher than any finite error; two failures are even.
+        rows.append(
+            [
+                d,
+                len(a),
+                f"{diff:+.1f}",
+                f"{lo:+.1f} to {hi:+.1f}",
+                sum(x < y / 1.1 for x, y in zip(a, b)),
+                sum(x > 1.1 * y for x, y in zip(a, b)),
+            ]
+        )
+    lines += common.md_table(
+        ["set", "pairs", "AUC@10 difference", "90% interval", "lower", "higher"], rows
+    )
     if modulo:
         n = len(next(iter(modulo.values())))
         lines += [
@@ -1035,6 +1083,37 @@ def paired_ratio(rows: list[dict], problem: str, family: str, a: str, b: str):
     return float(np.exp(np.mean(np.log(ratios)))), int(np.sum(ratios < 1.0)), len(pairs)
 
 
+def best_peer_interval(
+    rows: list[dict], problem: str, family: str, method: str, peers=PEERS, seed: int = 0
+):
+    """A 90% bootstrap interval of ``method``'s median error over the best peer's (the ratio
+    in the targets' 'vs best peer' column), or None without ``method`` and a peer on common
+    seeds.
+
+    The seeds are resampled with replacement, the same draw for every method (the scenes are
+    shared, so their difficulty moves all methods together), and in each resample the medians,
+    the score (:func:`score`) and the best peer are taken again. A median of a few dozen
+    scenes moves from one draw of scenes to the next by more than the 10% of issue 22's 1.1
+    target: the interval says whether a family's ratio stands above 1.1 beyond that chance."""
+    by: dict = {}
+    for r in rows:
+        if r["problem"] == problem and r["family"] == family:
+            by.setdefault(r["seed"], {})[r["method"]] = (r["err1"], r["err2"])
+    present = [p for p in peers if any(p in v for v in by.values())]
+    seeds = [k for k, v in by.items() if method in v and all(p in v for p in present)]
+    if not present or not seeds:
+        return None
+    names = [method, *present]
+    errs = np.array([[by[k][m] for k in seeds] for m in names], float)  # (methods, seeds, 2)
+    draw = np.random.default_rng(seed).integers(0, len(seeds), (BOOTSTRAP_RESAMPLES, len(seeds)))
+    med = np.median(errs[:, draw, :], axis=2)  # (methods, resamples, 2)
+    med = np.maximum(med, 1e-12)
+    scores = med[..., 0] if problem == "homography" else np.sqrt(med[..., 0] * med[..., 1])
+    ratio = scores[0] / scores[1:].min(axis=0)
+    lo, hi = np.percentile(ratio, BOOTSTRAP_PERCENTILES)
+    return float(lo), float(hi)
+
+
 def targets(med: dict, problem: str, pf: list[str], fams, per_scene=()) -> list[str]:
     """Issue 22's targets for the default, family by family (``per_scene``: the rows of every
     scene, for the paired ratios to points and to PoseLib)."""
@@ -1055,6 +1134,7 @@ def targets(med: dict, problem: str, pf: list[str], fams, per_scene=()) -> list[
         )
         paired = paired_ratio(per_scene, problem, f, DEFAULT, POINTS_OF_DEFAULT)
         paired_pl = paired_ratio(per_scene, problem, f, DEFAULT, "poselib")
+        interval = best_peer_interval(per_scene, problem, f, DEFAULT)
         rows.append(
             [
                 f,
@@ -1067,6 +1147,7 @@ def targets(med: dict, problem: str, pf: list[str], fams, per_scene=()) -> list[
                 f"{score(d, problem) / max(score(best_peer, problem), 1e-12):.2f}"
                 if best_peer
                 else "–",
+                f"{interval[0]:.2f}–{interval[1]:.2f}" if interval else "–",
             ]
         )
     head = [
@@ -1081,7 +1162,11 @@ def targets(med: dict, problem: str, pf: list[str], fams, per_scene=()) -> list[
         "the default's error over the points' on the same scene; rotation and translation "
         "averaged in log for E and F), and in how many seeds the default is below points: "
         "the medians' ratio moves by tens of percent with one seed, the paired one does not. "
-        "'paired vs PoseLib': the same against PoseLib.",
+        "'paired vs PoseLib': the same against PoseLib. 'vs best peer, 90%': the 5th-95th "
+        "percentiles of that ratio over bootstrap resamples of the seeds (the medians and the "
+        "best peer taken again in each): where it lies above 1.1 the family fails the target "
+        "beyond the chance of the seeds; where only the point ratio does, this many seeds "
+        "cannot tell.",
         "",
     ]
     return (
@@ -1096,6 +1181,7 @@ def targets(med: dict, problem: str, pf: list[str], fams, per_scene=()) -> list[
                 "paired vs PoseLib",
                 "speed-up vs PoseLib",
                 "vs best peer",
+                "vs best peer, 90%",
             ],
             rows,
         )
@@ -1259,7 +1345,63 @@ def report(rows: list[dict], args, fams, meta) -> None:
             ],
         ) + [""]
         lines += targets(med, problem, pf, fams, rows)
+    png = args.out.with_name(args.out.name + "_vs_peer.png")
+    if plot_vs_peer(med, rows, args.problems, fams, png):
+        lines += [
+            "## The default against the best peer",
+            "",
+            f"![{DEFAULT} over the best peer per family, with the 90% bootstrap interval]"
+            f"({png.name})",
+            "",
+        ]
     common.write_report(args.out.with_suffix(".md"), lines)
+
+
+def plot_vs_peer(med: dict, rows: list[dict], problems, fams, path: Path) -> bool:
+    """The targets' 'vs best peer' ratio of the default per family and problem, with its 90%
+    bootstrap interval (:func:`best_peer_interval`), against issue 22's 1.1, into ``path``.
+    False (nothing written) without a peer in the run."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FormatStrFormatter, LogLocator, NullFormatter
+
+    panels = []
+    for problem in problems:
+        pts = []
+        for f, o in fams:
+            if not family_applies(problem, o) or (problem, f, DEFAULT) not in med:
+                continue
+            peers = [med[(problem, f, x)] for x in PEERS if (problem, f, x) in med]
+            interval = best_peer_interval(rows, problem, f, DEFAULT)
+            if not peers or interval is None:
+                continue
+            best = min(score(v, problem) for v in peers)
+            pts.append((f, score(med[(problem, f, DEFAULT)], problem) / max(best, 1e-12), interval))
+        if pts:
+            panels.append((problem, pts))
+    if not panels:
+        return False
+    height = max(len(p) for _, p in panels) * 0.28 + 1.2
+    fig, axes = plt.subplots(1, len(panels), figsize=(4.2 * len(panels), height), squeeze=False)
+    for ax, (problem, pts) in zip(axes[0], panels):
+        y = np.arange(len(pts))[::-1]
+        for yi, (_, r, (lo, hi)) in zip(y, pts):
+            colour = "tab:red" if lo > 1.1 else "tab:orange" if r > 1.1 else "tab:green"
+            ax.plot([lo, hi], [yi, yi], color=colour, lw=2)
+            ax.plot(r, yi, "o", color=colour, ms=4)
+        ax.axvline(1.0, color="0.4", lw=0.8)
+        ax.axvline(1.1, color="tab:red", lw=0.8, ls="--")
+        ax.set_xscale("log")
+        ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+        ax.xaxis.set_major_formatter(FormatStrFormatter("%g"))
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_yticks(y, [p[0] for p in pts], fontsize=8)
+        ax.set_title(dict(relpose="relative pose", fundamental="F", homography="H")[problem])
+        ax.set_xlabel(f"{DEFAULT} / best peer (median error)")
+    common.save_figure(fig, path)
+    return True
 
 
 if __name__ == "__main__":
