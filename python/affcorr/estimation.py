@@ -65,9 +65,10 @@ loop with adaptive termination, local optimisation and a final refinement (docs/
                                       hypothesis on all data
   ``affine_weight``      ``None``     weight (px^2) of the affine residual in scoring (``(N, 8)``
                                       only; 0: points only); ``None``: for F and the relative
-                                      pose on ACs, 50 (points again, sampled and scored, when
-                                      it costs over 20% of the inliers or a points model
-                                      explains 1.25x more: A too poor), else the lower weight
+                                      pose on ACs, 50 (points again, sampled, scored and
+                                      refined, when it costs over 20% of the inliers or a
+                                      points model explains 1.25x more: A too poor), else
+                                      the lower weight
                                       that the noise of A measured on its inliers allows
                                       (its model polished at it; docs/estimation.md); 0
                                       otherwise. ``info.affine_weight`` is the weight used

@@ -8,7 +8,7 @@
 use crate::engine::{Estimate, estimate, polish};
 use crate::error::{RansacError, Result};
 use crate::local_opt::LO_SCHEDULE;
-use crate::options::RansacOptions;
+use crate::options::{AffineRefinement, RansacOptions};
 use crate::problem::Problem;
 use crate::problems::fundamental::FundamentalProblem;
 use crate::problems::homography::HomographyProblem;
@@ -92,8 +92,7 @@ pub const DEFAULT_AFFINE_WEIGHT: f64 = 50.0;
 /// learned ACs can be off by 30%, where λ·SD_A alone is ~4 threshold² (tests/synthetic.rs), and
 /// on repetitive texture (a chessboard) wrong A of a consistent subset let a model with half the
 /// true inliers win the affine score (benches/results/scene_families.real.md). The estimate is
-/// then the points-scored one (whose final refinement still weighs A by its own estimated noise
-/// scale). An uncapped term is what gives the one-plane and narrow-baseline gains (a cap at
+/// then the estimate of the points alone (points-only scoring and refinements). An uncapped term is what gives the one-plane and narrow-baseline gains (a cap at
 /// threshold²/4 lost them: benches/results/scene_families.md), and there both models explain
 /// about as many points, so the affine one is kept.
 pub const DEFAULT_AFFINE_FALLBACK: f64 = 0.8;
@@ -203,8 +202,8 @@ const PROBE_CONFIDENCE: f64 = 0.99;
 /// for a model that beats the affine one by 1/[`DEFAULT_AFFINE_FALLBACK`], i.e. with an inlier
 /// ratio w ≥ (explained by the affine model's points) / (0.8 N): k = log(1 − 0.99) / log(1 − wᵐ)
 /// draws find one with 99% confidence (46 for E at w = 0.625; at most [`PROBE_ITERATIONS`]).
-/// Only when the affine estimate loses is the full run made, with point samples too: what the
-/// same data as points would give, plus the affine terms of the final refinement.
+/// Only when the affine estimate loses is the full run made, with point samples, points-only
+/// scoring and points-only refinements: exactly what the same data as points give.
 ///
 /// The probe samples points because poor A is the case in question: 2-AC hypotheses of poor A
 /// find a consistent decoy instead (tests/synthetic.rs), or half the true inliers on repetitive
@@ -236,7 +235,12 @@ fn points_fallback<P: Problem>(
             .is_ok_and(|p| by_points < DEFAULT_AFFINE_FALLBACK * p.num_inliers as f64)
     };
     if too_poor {
-        run(points, opts, ScoringKind::Msac).ok()
+        // A judged too poor to score with stays out of the refinements too: weighed by its
+        // own estimated noise there, it still moved poses on repetitive texture away from
+        // the points' (docs/estimation.md, "Poor A stays out").
+        let mut points_only = opts.clone();
+        points_only.ransac.affine_refinement = AffineRefinement::Off;
+        run(points, &points_only, ScoringKind::Msac).ok()
     } else {
         None
     }

@@ -22,13 +22,19 @@ fn recall(truth: &[bool], found: &[bool]) -> f64 {
 
 fn options(threshold: f64, kind: SampleKind, seed: u64) -> EstimatorOptions {
     EstimatorOptions {
+        sample: Some(kind),
+        ..default_options(threshold, seed)
+    }
+}
+
+/// The estimators' defaults at `threshold` and `seed`.
+fn default_options(threshold: f64, seed: u64) -> EstimatorOptions {
+    EstimatorOptions {
         ransac: RansacOptions {
             threshold,
             seed,
-
             ..Default::default()
         },
-        sample: Some(kind),
         ..Default::default()
     }
 }
@@ -507,4 +513,38 @@ fn the_default_affine_weight_follows_the_noise_of_a() {
         measured_runs >= 2,
         "the measured weight scored only {measured_runs} of 8 estimates"
     );
+}
+
+#[test]
+fn acs_too_poor_to_score_with_give_the_estimate_of_their_points() {
+    // A off by 50%: the default falls back to points (`affine_weight` 0), and then its A no
+    // longer enters the final refinement either, so the ACs give exactly what their points
+    // give (the same seed, the same samples). With A in that refinement, repetitive texture
+    // moved real poses away from the points' (docs/estimation.md, "Poor A stays out").
+    let mut rng = Pcg64::seed_from_u64(31);
+    for trial in 0..3 {
+        let scene = PlaneScene::random(&mut rng);
+        let poor = make_data(&mut rng, &scene, 4, 500, 0.3, 0.5, 0.5);
+        let points = poor.data.points_only();
+        let opts = default_options(1.5, trial);
+        let (k1, k2) = (&scene.k1, &scene.k2);
+        let e = estimate_relative_pose(&poor.data, k1, k2, &opts).unwrap();
+        let p = estimate_relative_pose(&points, k1, k2, &opts).unwrap();
+        assert_eq!(e.affine_weight, 0.0, "trial {trial}: the fallback");
+        assert_eq!(e.inliers, p.inliers, "trial {trial}: pose inliers");
+        let (re, rp) = (&e.model.pose, &p.model.pose);
+        assert!(
+            (re.r - rp.r).norm() < 1e-12 && (re.t - rp.t).norm() < 1e-12,
+            "trial {trial}: pose {re:?} against the points' {rp:?}"
+        );
+        let f = estimate_fundamental(&poor.data, &opts).unwrap();
+        let fp = estimate_fundamental(&points, &opts).unwrap();
+        assert_eq!(f.affine_weight, 0.0, "trial {trial}: F's fallback");
+        assert_eq!(f.inliers, fp.inliers, "trial {trial}: F inliers");
+        let (fe, fq) = (f.model / f.model.norm(), fp.model / fp.model.norm());
+        assert!(
+            (fe - fq).norm().min((fe + fq).norm()) < 1e-12,
+            "trial {trial}: F {fe} against the points' {fq}"
+        );
+    }
 }
