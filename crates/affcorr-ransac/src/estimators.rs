@@ -92,9 +92,10 @@ pub const DEFAULT_AFFINE_WEIGHT: f64 = 50.0;
 /// learned ACs can be off by 30%, where λ·SD_A alone is ~4 threshold² (tests/synthetic.rs), and
 /// on repetitive texture (a chessboard) wrong A of a consistent subset let a model with half the
 /// true inliers win the affine score (benches/results/scene_families.real.md). The estimate is
-/// then the estimate of the points alone (points-only scoring and refinements). An uncapped term is what gives the one-plane and narrow-baseline gains (a cap at
-/// threshold²/4 lost them: benches/results/scene_families.md), and there both models explain
-/// about as many points, so the affine one is kept.
+/// then the estimate of the points alone (points-only scoring and refinements). An uncapped
+/// term is what gives the one-plane and narrow-baseline gains (a cap at threshold²/4 lost
+/// them: benches/results/scene_families.md), and there both models explain about as many
+/// points, so the affine one is kept.
 pub const DEFAULT_AFFINE_FALLBACK: f64 = 0.8;
 
 /// The affine scoring weight of an epipolar problem (F, relative pose) under `opts` on `data`,
