@@ -1114,6 +1114,20 @@ def best_peer_interval(
     return float(lo), float(hi)
 
 
+def default_vs_best_peer(med: dict, rows: list[dict], problem: str, family: str):
+    """The default's median error over the best peer's in ``family`` (:func:`score`) and its
+    interval (:func:`best_peer_interval`; None without the per-scene ``rows``), or None
+    without the default or a peer: the targets' 'vs best peer' columns and the plot's points."""
+    d = med.get((problem, family, DEFAULT))
+    peers = [
+        score(med[(problem, family, x)], problem) for x in PEERS if (problem, family, x) in med
+    ]
+    if d is None or not peers:
+        return None
+    ratio = score(d, problem) / max(min(peers), 1e-12)
+    return ratio, best_peer_interval(rows, problem, family, DEFAULT)
+
+
 def targets(med: dict, problem: str, pf: list[str], fams, per_scene=()) -> list[str]:
     """Issue 22's targets for the default, family by family (``per_scene``: the rows of every
     scene, for the paired ratios to points and to PoseLib)."""
@@ -1123,8 +1137,8 @@ def targets(med: dict, problem: str, pf: list[str], fams, per_scene=()) -> list[
         d, p, pl = (med.get((problem, f, m)) for m in (DEFAULT, POINTS_OF_DEFAULT, "poselib"))
         if d is None:
             continue
-        peers = [med[(problem, f, x)] for x in PEERS if (problem, f, x) in med]
-        best_peer = min(peers, key=lambda v: score(v, problem)) if peers else None
+        vs_peer = default_vs_best_peer(med, per_scene, problem, f)
+        interval = vs_peer[1] if vs_peer else None
         informative = {**BASE, **over[f]}["aff"] <= 0.03
         pair = lambda a, b: (  # noqa: E731
             f"{a['err1'] / max(b['err1'], 1e-12):.2f}"
@@ -1134,7 +1148,6 @@ def targets(med: dict, problem: str, pf: list[str], fams, per_scene=()) -> list[
         )
         paired = paired_ratio(per_scene, problem, f, DEFAULT, POINTS_OF_DEFAULT)
         paired_pl = paired_ratio(per_scene, problem, f, DEFAULT, "poselib")
-        interval = best_peer_interval(per_scene, problem, f, DEFAULT)
         rows.append(
             [
                 f,
@@ -1144,9 +1157,7 @@ def targets(med: dict, problem: str, pf: list[str], fams, per_scene=()) -> list[
                 pair(d, pl) if pl else "–",
                 f"{paired_pl[0]:.2f} ({paired_pl[1]}/{paired_pl[2]})" if paired_pl else "–",
                 f"{pl['ms'] / max(d['ms'], 1e-9):.1f}" if pl else "–",
-                f"{score(d, problem) / max(score(best_peer, problem), 1e-12):.2f}"
-                if best_peer
-                else "–",
+                f"{vs_peer[0]:.2f}" if vs_peer else "–",
                 f"{interval[0]:.2f}–{interval[1]:.2f}" if interval else "–",
             ]
         )
@@ -1371,14 +1382,12 @@ def plot_vs_peer(med: dict, rows: list[dict], problems, fams, path: Path) -> boo
     for problem in problems:
         pts = []
         for f, o in fams:
-            if not family_applies(problem, o) or (problem, f, DEFAULT) not in med:
+            vs_peer = (
+                default_vs_best_peer(med, rows, problem, f) if family_applies(problem, o) else None
+            )
+            if vs_peer is None or vs_peer[1] is None:
                 continue
-            peers = [med[(problem, f, x)] for x in PEERS if (problem, f, x) in med]
-            interval = best_peer_interval(rows, problem, f, DEFAULT)
-            if not peers or interval is None:
-                continue
-            best = min(score(v, problem) for v in peers)
-            pts.append((f, score(med[(problem, f, DEFAULT)], problem) / max(best, 1e-12), interval))
+            pts.append((f, *vs_peer))
         if pts:
             panels.append((problem, pts))
     if not panels:
