@@ -116,12 +116,52 @@ pub fn triangulate_depths(pose: &Pose, x1: &Vec2, x2: &Vec2) -> Option<(f64, f64
     Some((l1, l2))
 }
 
+/// Where the point seen at normalised x1, x2 lies under a pose ([`cheirality`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Cheirality {
+    /// In front of both cameras: both depths of [`triangulate_depths`] positive.
+    InFront,
+    /// Behind either camera.
+    Behind,
+    /// The rays are parallel (a point at infinity): [`triangulate_depths`] gives `None`.
+    Parallel,
+}
+
+/// The signs of [`triangulate_depths`]' depths without its divisions: they share the positive
+/// determinant of the normal equations, so each depth has its numerator's sign. Free of
+/// branches and divisions, so that loops over many correspondences vectorise.
+///
+/// ```
+/// use affcorr_geom::{Mat3, Vec2, Vec3, epipolar::{Cheirality, Pose, cheirality}};
+/// let pose = Pose { r: Mat3::identity(), t: Vec3::new(1.0, 0.0, 0.0) };
+/// // A point at (0, 0, 4) in camera 1 is at (1, 0, 4) in camera 2; at (0, 0, -4), behind.
+/// assert_eq!(cheirality(&pose, &Vec2::zeros(), &Vec2::new(0.25, 0.0)), Cheirality::InFront);
+/// assert_eq!(cheirality(&pose, &Vec2::zeros(), &Vec2::new(-0.25, 0.0)), Cheirality::Behind);
+/// assert_eq!(cheirality(&pose, &Vec2::zeros(), &Vec2::zeros()), Cheirality::Parallel);
+/// ```
+#[inline(always)]
+pub fn cheirality(pose: &Pose, x1: &Vec2, x2: &Vec2) -> Cheirality {
+    let a = pose.r * Vec3::new(x1.x, x1.y, 1.0);
+    let b = Vec3::new(x2.x, x2.y, 1.0);
+    let (aa, ab, bb) = (a.dot(&a), a.dot(&b), b.dot(&b));
+    let (at, bt) = (a.dot(&pose.t), b.dot(&pose.t));
+    let det = aa * bb - ab * ab;
+    let (n1, n2) = (ab * bt - bb * at, aa * bt - ab * at);
+    if det <= 1e-14 * aa * bb {
+        Cheirality::Parallel
+    } else if n1 > 0.0 && n2 > 0.0 {
+        Cheirality::InFront
+    } else {
+        Cheirality::Behind
+    }
+}
+
 /// Number of correspondences (normalised coordinates) in front of both cameras under `pose`.
 pub fn count_in_front(pose: &Pose, x1: &[Vec2], x2: &[Vec2]) -> usize {
     x1.iter()
         .zip(x2)
-        .filter(|(a, b)| matches!(triangulate_depths(pose, a, b), Some((l1, l2)) if l1 > 0.0 && l2 > 0.0))
-        .count()
+        .map(|(a, b)| usize::from(cheirality(pose, a, b) == Cheirality::InFront))
+        .sum()
 }
 
 /// The factorisation of `e` that puts the most correspondences in front of both cameras.

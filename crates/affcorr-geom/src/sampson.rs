@@ -187,7 +187,7 @@ fn ratio(r: f64, d: f64) -> f64 {
 /// // One pixel off the line, shared between the two images: 1² / (1 + 1).
 /// assert!((sampson_point(&f, &off) - 0.5).abs() < 1e-15);
 /// ```
-#[inline]
+#[inline(always)]
 pub fn sampson_point(f: &Mat3, c: &PointCorrespondence) -> f64 {
     let f = entries(f);
     let (p1, p2) = ([c.x1.x, c.x1.y], [c.x2.x, c.x2.y]);
@@ -322,7 +322,8 @@ pub fn sampson_affine(f: &Mat3, ac: &AffineCorrespondence) -> [f64; 2] {
 
 /// `(SD_P, [SD_A,0, SD_A,1])` of one AC, sharing F p1 and Fᵀ p2: bit-identical to
 /// [`sampson_point`] and [`sampson_affine`], for residuals that mix the two (docs/design.md §5).
-#[inline]
+/// Always inlined: the scoring loops over it vectorise only then.
+#[inline(always)]
 pub fn sampson_point_affine(f: &Mat3, ac: &AffineCorrespondence) -> (f64, [f64; 2]) {
     let t = affine_terms(f, ac);
     let (l1, l2) = (&t.l1, &t.l2);

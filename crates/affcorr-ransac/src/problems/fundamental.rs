@@ -8,7 +8,7 @@
 //!   min(λ·c·(SD_A,1 + SD_A,2), cap), the affine Sampson distances of docs/design.md §3 with the
 //!   AC's confidence c (1 without) and a cap (+∞ unless set).
 
-use super::simd::dispatch;
+use super::simd::{BLOCK, dispatch, gather};
 use super::{
     Correspondences, SEED_AFFINE_WEIGHT, SampleKind, count_below, epipolar_lm, hybrid_support,
     most_models,
@@ -18,7 +18,7 @@ use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Mat9, Vec9, levenberg_marquardt};
 use affcorr_geom::epipolar::skew;
 use affcorr_geom::homography::ac_from_homography;
-use affcorr_geom::sampson::{sampson_affine, sampson_point};
+use affcorr_geom::sampson::{sampson_point, sampson_point_affine};
 use affcorr_geom::{AffineCorrespondence, Mat3, PointCorrespondence, Vec2, Vec3};
 use affcorr_solvers::fundamental::{
     FUNDAMENTAL_1AC4PT_MAX_SOLUTIONS, FUNDAMENTAL_3AC_MAX_SOLUTIONS, FUNDAMENTAL_7PT_MAX_SOLUTIONS,
@@ -140,16 +140,23 @@ impl AffineScore<'_> {
 /// Squared Sampson residual of datum `i` under `f`: SD_P + min(λ c_i (SD_A,0 + SD_A,1), cap).
 #[inline(always)]
 fn epipolar_residual(data: &Correspondences, f: &Mat3, a: &AffineScore<'_>, i: usize) -> f64 {
-    let points = PointCorrespondence {
-        x1: data.x1[i],
-        x2: data.x2[i],
-    };
     if a.weight == 0.0 {
+        let points = PointCorrespondence {
+            x1: data.x1[i],
+            x2: data.x2[i],
+        };
         return sampson_point(f, &points);
     }
-    let [a0, a1] = sampson_affine(f, &data.ac(i));
     let w = a.weight * a.confidence.map_or(1.0, |c| c[i]);
-    sampson_point(f, &points) + (w * (a0 + a1)).min(a.cap)
+    mixed_residual(f, &data.ac(i), w, a.cap)
+}
+
+/// SD_P + min(w (SD_A,0 + SD_A,1), cap) of one AC, the point and affine forms sharing F p1 and
+/// Fᵀ p2 ([`sampson_point_affine`]); branch-free, so that loops over it vectorise.
+#[inline(always)]
+fn mixed_residual(f: &Mat3, ac: &AffineCorrespondence, w: f64, cap: f64) -> f64 {
+    let (p, [a0, a1]) = sampson_point_affine(f, ac);
+    p + (w * (a0 + a1)).min(cap)
 }
 
 /// The data that can seed a good AC sample of `sample_size` under `f`
@@ -191,30 +198,52 @@ pub(crate) fn epipolar_residuals(
     start: usize,
     out: &mut [f64],
 ) {
+    // The hot loops of scoring: slices instead of indices and no loop-invariant branch inside,
+    // so that the compiler can vectorise them.
+    let end = start + out.len();
+    let (x1, x2) = (&data.x1[start..end], &data.x2[start..end]);
     if affine.weight != 0.0 {
-        for (k, o) in out.iter_mut().enumerate() {
-            *o = epipolar_residual(data, f, affine, start + k);
+        let (weight, cap, a) = (affine.weight, affine.cap, &data.a[start..end]);
+        let ac = |k: usize| AffineCorrespondence {
+            x1: x1[k],
+            x2: x2[k],
+            a: a[k],
+        };
+        match affine.confidence {
+            Some(c) => {
+                let c = &c[start..end];
+                dispatch(
+                    #[inline(always)]
+                    || {
+                        for (k, o) in out.iter_mut().enumerate() {
+                            *o = mixed_residual(f, &ac(k), weight * c[k], cap);
+                        }
+                    },
+                );
+            }
+            None => dispatch(
+                #[inline(always)]
+                || {
+                    for (k, o) in out.iter_mut().enumerate() {
+                        *o = mixed_residual(f, &ac(k), weight, cap);
+                    }
+                },
+            ),
         }
         return;
     }
-    // The hot loop of scoring: slices instead of indices and no loop-invariant branch inside,
-    // so that the compiler can vectorise it.
-    let end = start + out.len();
     dispatch(
         #[inline(always)]
         || {
-            for ((o, x1), x2) in out
-                .iter_mut()
-                .zip(&data.x1[start..end])
-                .zip(&data.x2[start..end])
-            {
+            for ((o, x1), x2) in out.iter_mut().zip(x1).zip(x2) {
                 *o = sampson_point(f, &PointCorrespondence { x1: *x1, x2: *x2 });
             }
         },
     );
 }
 
-/// [`epipolar_residuals`] of the data `indices`, in their order (the SPRT's random order).
+/// [`epipolar_residuals`] of the data `indices`, in their order (the SPRT's random order),
+/// gathered block by block so that they vectorise as [`epipolar_residuals`]' do.
 pub(crate) fn epipolar_residuals_at(
     data: &Correspondences,
     f: &Mat3,
@@ -222,8 +251,35 @@ pub(crate) fn epipolar_residuals_at(
     indices: &[usize],
     out: &mut [f64],
 ) {
-    for (o, &i) in out.iter_mut().zip(indices) {
-        *o = epipolar_residual(data, f, affine, i);
+    let (weight, cap) = (affine.weight, affine.cap);
+    for (idx, out) in indices.chunks(BLOCK).zip(out.chunks_mut(BLOCK)) {
+        let mut r = [0.0; BLOCK];
+        if weight == 0.0 {
+            let points = gather(idx, |i| PointCorrespondence {
+                x1: data.x1[i],
+                x2: data.x2[i],
+            });
+            dispatch(
+                #[inline(always)]
+                || {
+                    for (r, c) in r.iter_mut().zip(&points) {
+                        *r = sampson_point(f, c);
+                    }
+                },
+            );
+        } else {
+            let acs = gather(idx, |i| data.ac(i));
+            let w = gather(idx, |i| weight * affine.confidence.map_or(1.0, |c| c[i]));
+            dispatch(
+                #[inline(always)]
+                || {
+                    for ((r, ac), w) in r.iter_mut().zip(&acs).zip(&w) {
+                        *r = mixed_residual(f, ac, *w, cap);
+                    }
+                },
+            );
+        }
+        out.copy_from_slice(&r[..out.len()]);
     }
 }
 

@@ -10,13 +10,14 @@
 //!   for any fx ≠ fy (no mean-focal approximation), plus the weighted affine Sampson distances.
 
 use super::fundamental::{AffineScore, epipolar_residuals, epipolar_residuals_at, epipolar_seeds};
+use super::simd::{BLOCK, dispatch, gather};
 use super::{Correspondences, SampleKind, epipolar_lm, most_models};
 use crate::loss::Loss;
 use crate::problem::Problem;
 use crate::refine::{LeastSquares, LmOptions, Mat9, Vec9, levenberg_marquardt};
 use affcorr_geom::camera::{Intrinsics, normalize_ac};
 use affcorr_geom::epipolar::{
-    Pose, fundamental_from_essential, pose_from_essential, skew, triangulate_depths,
+    Cheirality, Pose, cheirality, fundamental_from_essential, pose_from_essential, skew,
 };
 use affcorr_geom::{AffineCorrespondence, Mat3, Vec2, Vec3};
 use affcorr_solvers::essential::essential_lsq;
@@ -132,25 +133,23 @@ impl<'a> RelativePoseProblem<'a> {
         }
     }
 
-    /// Sets the squared residual `r2` of datum `i` to +∞ when the point it triangulates to lies
-    /// behind either camera: such a correspondence can satisfy the epipolar constraint but not
-    /// the pose (PoseLib's relative-pose score checks the same). Only data below the cheirality
-    /// threshold of [`RelativePoseProblem::new`] pay for the check. Parallel rays (points at
-    /// infinity) pass.
-    #[inline(always)]
-    fn behind_is_outlier(&self, m: &PoseModel, i: usize, r2: &mut f64) {
-        if *r2 < self.cheirality_cap_sq
-            && let Some((l1, l2)) =
-                triangulate_depths(&m.pose, &self.normalized.x1[i], &self.normalized.x2[i])
-            && !(l1 > 0.0 && l2 > 0.0)
-        {
-            *r2 = f64::INFINITY;
-        }
-    }
-
     /// Normalised coordinates of the data.
     pub fn normalized(&self) -> &Correspondences {
         &self.normalized
+    }
+}
+
+/// The squared residual `r2` of a correspondence (normalised x1, x2), or +∞ when it is below
+/// the cheirality threshold² `cap` (of [`RelativePoseProblem::new`]) and its point lies behind
+/// either camera under `pose`: such a correspondence can satisfy the epipolar constraint but
+/// not the pose (PoseLib's relative-pose score checks the same). Parallel rays (points at
+/// infinity) pass. Branch-free ([`cheirality`]), so that the scoring loop vectorises.
+#[inline(always)]
+fn behind_is_outlier(pose: &Pose, x1: &Vec2, x2: &Vec2, r2: f64, cap: f64) -> f64 {
+    if r2 < cap && cheirality(pose, x1, x2) == Cheirality::Behind {
+        f64::INFINITY
+    } else {
+        r2
     }
 }
 
@@ -240,9 +239,21 @@ impl Problem for RelativePoseProblem<'_> {
             start,
             out,
         );
-        for (k, o) in out.iter_mut().enumerate() {
-            self.behind_is_outlier(m, start + k, o);
-        }
+        let end = start + out.len();
+        let (x1, x2) = (
+            &self.normalized.x1[start..end],
+            &self.normalized.x2[start..end],
+        );
+        let cap = self.cheirality_cap_sq;
+        // Slices and a branch-free kernel, so that the loop vectorises.
+        dispatch(
+            #[inline(always)]
+            || {
+                for ((o, x1), x2) in out.iter_mut().zip(x1).zip(x2) {
+                    *o = behind_is_outlier(&m.pose, x1, x2, *o, cap);
+                }
+            },
+        );
     }
 
     fn residuals_at(&self, m: &PoseModel, indices: &[usize], out: &mut [f64]) {
@@ -253,8 +264,18 @@ impl Problem for RelativePoseProblem<'_> {
             indices,
             out,
         );
-        for (o, &i) in out.iter_mut().zip(indices) {
-            self.behind_is_outlier(m, i, o);
+        let cap = self.cheirality_cap_sq;
+        for (idx, out) in indices.chunks(BLOCK).zip(out.chunks_mut(BLOCK)) {
+            let x1 = gather(idx, |i| self.normalized.x1[i]);
+            let x2 = gather(idx, |i| self.normalized.x2[i]);
+            dispatch(
+                #[inline(always)]
+                || {
+                    for ((o, x1), x2) in out.iter_mut().zip(&x1).zip(&x2) {
+                        *o = behind_is_outlier(&m.pose, x1, x2, *o, cap);
+                    }
+                },
+            );
         }
     }
 

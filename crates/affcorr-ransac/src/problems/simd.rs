@@ -61,6 +61,14 @@ pub(crate) fn dispatch<R>(kernel: impl FnOnce() -> R) -> R {
     kernel()
 }
 
+/// The data of `indices` (1 to [`BLOCK`] of them) fetched by `at` into a block, the last one
+/// repeated to fill it, so that kernels over data in random order (the SPRT's) run blocked and
+/// vectorised too.
+#[inline(always)]
+pub(crate) fn gather<T>(indices: &[usize], at: impl Fn(usize) -> T) -> [T; BLOCK] {
+    std::array::from_fn(|k| at(indices[k.min(indices.len() - 1)]))
+}
+
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn with_avx2<R>(kernel: impl FnOnce() -> R) -> R {
