@@ -1,19 +1,22 @@
 //! The scoring residuals of the epipolar problems, computed in vectorised blocks (`residuals`)
-//! and datum by datum in the SPRT's order (`residuals_at`), against their definition from the
-//! geometry crate's Sampson distances: SD_P + min(λ c (SD_A,0 + SD_A,1), cap), bit for bit.
+//! and in gathered blocks in the SPRT's order (`residuals_at`), against their definition from
+//! the geometry crate: SD_P + min(λ c (SD_A,0 + SD_A,1), cap), bit for bit, and for relative
+//! poses +∞ where a datum below the cheirality threshold triangulates behind a camera.
 
 use affcorr_geom::AffineCorrespondence;
+use affcorr_geom::epipolar::{Pose, triangulate_depths};
 use affcorr_geom::sampson::{sampson_affine, sampson_point};
 use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
 use affcorr_ransac::Problem;
 use affcorr_ransac::problems::fundamental::FundamentalProblem;
+use affcorr_ransac::problems::relpose::RelativePoseProblem;
 use affcorr_ransac::{Correspondences, SampleKind};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
 /// 203 ACs (not a multiple of any vector width) of a three-plane scene with outliers, one of
 /// them with A = 0, and the scene's F.
-fn data(seed: u64) -> (Vec<AffineCorrespondence>, affcorr_geom::Mat3) {
+fn data(seed: u64) -> (Vec<AffineCorrespondence>, PlaneScene) {
     let mut rng = Pcg64::seed_from_u64(seed);
     let scene = PlaneScene::random(&mut rng);
     let noise = NoiseModel {
@@ -24,7 +27,31 @@ fn data(seed: u64) -> (Vec<AffineCorrespondence>, affcorr_geom::Mat3) {
     };
     let (mut acs, _) = noisy_correspondences(&mut rng, &scene, 203, &noise);
     acs[7].a = affcorr_geom::Mat2::zeros();
-    (acs, scene.fundamental())
+    (acs, scene)
+}
+
+/// `problem`'s residuals under `model`, in blocks that start anywhere (as the engine's scoring
+/// windows do) and in a random-like order, each equal to `expected` bit for bit.
+fn assert_residuals<P: Problem>(problem: &P, model: &P::Model, expected: &[f64]) {
+    let n = expected.len();
+    for (start, len) in [(0, n), (5, 37), (64, 139), (n - 3, 3)] {
+        let mut out = vec![f64::NAN; len];
+        problem.residuals(model, start, &mut out);
+        for (k, o) in out.iter().enumerate() {
+            assert_eq!(
+                o.to_bits(),
+                expected[start + k].to_bits(),
+                "datum {}",
+                start + k
+            );
+        }
+    }
+    let order: Vec<usize> = (0..n).rev().step_by(3).collect();
+    let mut out = vec![f64::NAN; order.len()];
+    problem.residuals_at(model, &order, &mut out);
+    for (o, &i) in out.iter().zip(&order) {
+        assert_eq!(o.to_bits(), expected[i].to_bits(), "datum {i} in order");
+    }
 }
 
 fn definition(f: &affcorr_geom::Mat3, ac: &AffineCorrespondence, w: f64, cap: f64) -> f64 {
@@ -40,7 +67,8 @@ fn definition(f: &affcorr_geom::Mat3, ac: &AffineCorrespondence, w: f64, cap: f6
 #[test]
 fn epipolar_scoring_residuals_equal_their_definition_bit_for_bit() {
     for seed in 0..3 {
-        let (acs, f) = data(seed);
+        let (acs, scene) = data(seed);
+        let f = scene.fundamental();
         let data = Correspondences::from_acs(&acs).unwrap();
         let mut rng = Pcg64::seed_from_u64(100 + seed);
         let confidence: Vec<f64> = (0..acs.len()).map(|_| rng.random_range(0.0..1.0)).collect();
@@ -59,25 +87,58 @@ fn epipolar_scoring_residuals_equal_their_definition_bit_for_bit() {
                 .enumerate()
                 .map(|(i, ac)| definition(&f, ac, weight * conf.map_or(1.0, |c| c[i]), cap))
                 .collect();
-            // Blocks that start anywhere, as the engine's scoring windows do.
-            for (start, len) in [(0, acs.len()), (5, 37), (64, 139), (200, 3)] {
-                let mut out = vec![f64::NAN; len];
-                problem.residuals(&f, start, &mut out);
-                for (k, o) in out.iter().enumerate() {
-                    assert_eq!(
-                        o.to_bits(),
-                        expected[start + k].to_bits(),
-                        "datum {}",
-                        start + k
-                    );
-                }
+            assert_residuals(&problem, &f, &expected);
+        }
+    }
+}
+
+#[test]
+fn relative_pose_residuals_put_points_behind_a_camera_out_bit_for_bit() {
+    let cheirality_threshold = 8.0;
+    for seed in 0..3 {
+        let (acs, scene) = data(seed);
+        let data = Correspondences::from_acs(&acs).unwrap();
+        for weight in [0.0, 50.0] {
+            let problem = RelativePoseProblem::new(
+                &data,
+                scene.k1,
+                scene.k2,
+                SampleKind::Affine,
+                weight,
+                cheirality_threshold,
+            );
+            // The true pose, and its twin with -t, which puts the scene behind the cameras.
+            let twin = Pose {
+                r: scene.pose.r,
+                t: -scene.pose.t,
+            };
+            let mut behind = 0;
+            for pose in [scene.pose, twin] {
+                let model = problem.model(pose);
+                let normalized = problem.normalized();
+                let expected: Vec<f64> = acs
+                    .iter()
+                    .enumerate()
+                    .map(|(i, ac)| {
+                        let r2 = definition(&model.fundamental, ac, weight, f64::INFINITY);
+                        let (x1, x2) = (&normalized.x1[i], &normalized.x2[i]);
+                        match triangulate_depths(&pose, x1, x2) {
+                            Some((l1, l2))
+                                if r2 < cheirality_threshold.powi(2) && !(l1 > 0.0 && l2 > 0.0) =>
+                            {
+                                behind += 1;
+                                f64::INFINITY
+                            }
+                            _ => r2,
+                        }
+                    })
+                    .collect();
+                assert_residuals(&problem, &model, &expected);
             }
-            let order: Vec<usize> = (0..acs.len()).rev().step_by(3).collect();
-            let mut out = vec![f64::NAN; order.len()];
-            problem.residuals_at(&f, &order, &mut out);
-            for (o, &i) in out.iter().zip(&order) {
-                assert_eq!(o.to_bits(), expected[i].to_bits(), "datum {i} in order");
-            }
+            assert!(
+                behind > 100,
+                "the twin pose puts the inliers behind ({behind})"
+            );
         }
     }
 }
