@@ -1,7 +1,8 @@
 //! The scoring residuals of the epipolar problems, computed in vectorised blocks (`residuals`)
 //! and in gathered blocks in the SPRT's order (`residuals_at`), against their definition from
 //! the geometry crate: SD_P + min(λ c (SD_A,0 + SD_A,1), cap), bit for bit, and for relative
-//! poses +∞ where a datum below the cheirality threshold triangulates behind a camera.
+//! poses +∞ where a datum below the cheirality threshold triangulates behind a camera; for
+//! homographies scored on points the squared transfer error.
 
 use affcorr_geom::AffineCorrespondence;
 use affcorr_geom::epipolar::{Pose, triangulate_depths};
@@ -9,6 +10,7 @@ use affcorr_geom::sampson::{sampson_affine, sampson_point};
 use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
 use affcorr_ransac::Problem;
 use affcorr_ransac::problems::fundamental::FundamentalProblem;
+use affcorr_ransac::problems::homography::HomographyProblem;
 use affcorr_ransac::problems::relpose::RelativePoseProblem;
 use affcorr_ransac::{Correspondences, SampleKind};
 use rand::{Rng, SeedableRng};
@@ -140,5 +142,25 @@ fn relative_pose_residuals_put_points_behind_a_camera_out_bit_for_bit() {
                 "the twin pose puts the inliers behind ({behind})"
             );
         }
+    }
+}
+
+#[test]
+fn homography_residuals_are_the_squared_transfer_error_bit_for_bit() {
+    for seed in 0..3 {
+        let (acs, scene) = data(seed);
+        let h = scene.homography();
+        let data = Correspondences::from_acs(&acs).unwrap();
+        let problem = HomographyProblem::new(&data, SampleKind::Affine, 0.0);
+        let expected: Vec<f64> = acs
+            .iter()
+            .map(|ac| {
+                let p = h * affcorr_geom::Vec3::new(ac.x1.x, ac.x1.y, 1.0);
+                let inv_w = 1.0 / p.z;
+                let (du, dv) = (p.x * inv_w - ac.x2.x, p.y * inv_w - ac.x2.y);
+                du * du + dv * dv
+            })
+            .collect();
+        assert_residuals(&problem, &h, &expected);
     }
 }
