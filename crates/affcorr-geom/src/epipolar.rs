@@ -128,8 +128,9 @@ pub enum Cheirality {
 }
 
 /// The signs of [`triangulate_depths`]' depths without its divisions: they share the positive
-/// determinant of the normal equations, so each depth has its numerator's sign. Free of
-/// branches and divisions, so that loops over many correspondences vectorise.
+/// determinant of the normal equations, so each depth has its numerator's sign. Without
+/// divisions, and its three outcomes are selects, so that loops over many correspondences
+/// vectorise.
 ///
 /// ```
 /// use affcorr_geom::{Mat3, Vec2, Vec3, epipolar::{Cheirality, Pose, cheirality}};
