@@ -7,7 +7,7 @@
 use affcorr_geom::AffineCorrespondence;
 use affcorr_geom::epipolar::{Pose, triangulate_depths};
 use affcorr_geom::sampson::{sampson_affine, sampson_point};
-use affcorr_geom::synthetic::{NoiseModel, PlaneScene, noisy_correspondences};
+use affcorr_geom::synthetic::PlaneScene;
 use affcorr_ransac::Problem;
 use affcorr_ransac::problems::fundamental::FundamentalProblem;
 use affcorr_ransac::problems::homography::HomographyProblem;
@@ -16,20 +16,17 @@ use affcorr_ransac::{Correspondences, SampleKind};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
+mod common;
+use common::make_data;
+
 /// 203 ACs (not a multiple of any vector width) of a three-plane scene with outliers, one of
-/// them with A = 0, and the scene's F.
-fn data(seed: u64) -> (Vec<AffineCorrespondence>, PlaneScene) {
+/// them with A = 0, and the scene.
+fn scene_data(seed: u64) -> (Correspondences, PlaneScene) {
     let mut rng = Pcg64::seed_from_u64(seed);
     let scene = PlaneScene::random(&mut rng);
-    let noise = NoiseModel {
-        planes: 3,
-        outlier_ratio: 0.4,
-        pixel_noise: 0.5,
-        affine_noise: 0.05,
-    };
-    let (mut acs, _) = noisy_correspondences(&mut rng, &scene, 203, &noise);
-    acs[7].a = affcorr_geom::Mat2::zeros();
-    (acs, scene)
+    let mut data = make_data(&mut rng, &scene, 3, 203, 0.4, 0.5, 0.05).data;
+    data.a[7] = affcorr_geom::Mat2::zeros();
+    (data, scene)
 }
 
 /// `problem`'s residuals under `model`, in blocks that start anywhere (as the engine's scoring
@@ -69,11 +66,12 @@ fn definition(f: &affcorr_geom::Mat3, ac: &AffineCorrespondence, w: f64, cap: f6
 #[test]
 fn epipolar_scoring_residuals_equal_their_definition_bit_for_bit() {
     for seed in 0..3 {
-        let (acs, scene) = data(seed);
+        let (data, scene) = scene_data(seed);
         let f = scene.fundamental();
-        let data = Correspondences::from_acs(&acs).unwrap();
         let mut rng = Pcg64::seed_from_u64(100 + seed);
-        let confidence: Vec<f64> = (0..acs.len()).map(|_| rng.random_range(0.0..1.0)).collect();
+        let confidence: Vec<f64> = (0..data.len())
+            .map(|_| rng.random_range(0.0..1.0))
+            .collect();
         for (weight, cap, conf) in [
             (0.0, f64::INFINITY, None),
             (50.0, f64::INFINITY, None),
@@ -84,10 +82,8 @@ fn epipolar_scoring_residuals_equal_their_definition_bit_for_bit() {
             let problem = FundamentalProblem::new(&data, SampleKind::Affine, weight, 1.0)
                 .with_affine_confidence(conf)
                 .with_affine_cap(cap);
-            let expected: Vec<f64> = acs
-                .iter()
-                .enumerate()
-                .map(|(i, ac)| definition(&f, ac, weight * conf.map_or(1.0, |c| c[i]), cap))
+            let expected: Vec<f64> = (0..data.len())
+                .map(|i| definition(&f, &data.ac(i), weight * conf.map_or(1.0, |c| c[i]), cap))
                 .collect();
             assert_residuals(&problem, &f, &expected);
         }
@@ -98,8 +94,7 @@ fn epipolar_scoring_residuals_equal_their_definition_bit_for_bit() {
 fn relative_pose_residuals_put_points_behind_a_camera_out_bit_for_bit() {
     let cheirality_threshold = 8.0;
     for seed in 0..3 {
-        let (acs, scene) = data(seed);
-        let data = Correspondences::from_acs(&acs).unwrap();
+        let (data, scene) = scene_data(seed);
         for weight in [0.0, 50.0] {
             let problem = RelativePoseProblem::new(
                 &data,
@@ -118,11 +113,9 @@ fn relative_pose_residuals_put_points_behind_a_camera_out_bit_for_bit() {
             for pose in [scene.pose, twin] {
                 let model = problem.model(pose);
                 let normalized = problem.normalized();
-                let expected: Vec<f64> = acs
-                    .iter()
-                    .enumerate()
-                    .map(|(i, ac)| {
-                        let r2 = definition(&model.fundamental, ac, weight, f64::INFINITY);
+                let expected: Vec<f64> = (0..data.len())
+                    .map(|i| {
+                        let r2 = definition(&model.fundamental, &data.ac(i), weight, f64::INFINITY);
                         let (x1, x2) = (&normalized.x1[i], &normalized.x2[i]);
                         match triangulate_depths(&pose, x1, x2) {
                             Some((l1, l2))
@@ -148,13 +141,12 @@ fn relative_pose_residuals_put_points_behind_a_camera_out_bit_for_bit() {
 #[test]
 fn homography_residuals_are_the_squared_transfer_error_bit_for_bit() {
     for seed in 0..3 {
-        let (acs, scene) = data(seed);
+        let (data, scene) = scene_data(seed);
         let h = scene.homography();
-        let data = Correspondences::from_acs(&acs).unwrap();
         let problem = HomographyProblem::new(&data, SampleKind::Affine, 0.0);
-        let expected: Vec<f64> = acs
-            .iter()
-            .map(|ac| {
+        let expected: Vec<f64> = (0..data.len())
+            .map(|i| {
+                let ac = data.ac(i);
                 let p = h * affcorr_geom::Vec3::new(ac.x1.x, ac.x1.y, 1.0);
                 let inv_w = 1.0 / p.z;
                 let (du, dv) = (p.x * inv_w - ac.x2.x, p.y * inv_w - ac.x2.y);
