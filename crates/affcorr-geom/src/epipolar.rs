@@ -97,6 +97,82 @@ pub fn decompose_essential(e: &Mat3) -> Result<[Pose; 4]> {
     ])
 }
 
+/// The factorisation of an essential matrix `e` that puts every correspondence (normalised
+/// coordinates) in front of both cameras, or `None` when none does (or `e` is not finite or has
+/// rank below 2). Ties go to the first candidate in [`decompose_essential`]'s order.
+///
+/// Meant for the minimal solvers' E, which are essential up to rounding: instead of an SVD it
+/// builds the bases in closed form. E = \[t\]× R has equal singular values σ and left null
+/// vector t, which is normal to every column of E: u₃ = t/|t| is the normalised largest cross
+/// product of two columns, u₁ the largest column made normal to u₃, u₂ = u₃ × u₁. Then
+/// Eᵀu₃ = 0 and E = Σᵢ uᵢ (Eᵀuᵢ)ᵀ = σ (u₁v₁ᵀ + u₂v₂ᵀ) with vᵢ = Eᵀuᵢ/σ, so U = \[u₁ u₂ u₃\] and
+/// V = \[v₁ v₂ v₁ × v₂\] are rotations with E = U diag(σ, σ, 0) Vᵀ, the form of Hartley &
+/// Zisserman's Result 9.19 that [`decompose_essential`] reads off an SVD. v₂ is made normal to
+/// v₁ so that V stays a rotation when `e` is essential only to rounding; for a noisy E (an
+/// over-determined fit) [`pose_from_essential`]'s projection by the SVD is the right tool.
+///
+/// The candidates are tested one by one and a candidate is dropped at its first point behind a
+/// camera, so a minimal sample costs about one cheirality test per wrong candidate.
+///
+/// ```
+/// use affcorr_geom::{Mat3, Vec2, Vec3, epipolar::{Pose, pose_with_all_in_front}};
+/// let truth = Pose { r: Mat3::identity(), t: Vec3::new(1.0, 0.0, 0.0) };
+/// // A point at (0, 0, 4) in camera 1 is at (1, 0, 4) in camera 2.
+/// let (x1, x2) = ([Vec2::new(0.0, 0.0)], [Vec2::new(0.25, 0.0)]);
+/// let pose = pose_with_all_in_front(&truth.essential(), &x1, &x2).unwrap();
+/// assert!((pose.r - truth.r).norm() < 1e-12 && (pose.t - truth.t).norm() < 1e-12);
+/// // Its mirror image (0, 0, -4), behind both cameras, is in front of both under (R, -t):
+/// // no factorisation keeps the two in front.
+/// let (y1, y2) = ([x1[0], x1[0]], [x2[0], Vec2::new(-0.25, 0.0)]);
+/// assert!(pose_with_all_in_front(&truth.essential(), &y1, &y2).is_none());
+/// ```
+pub fn pose_with_all_in_front(e: &Mat3, x1: &[Vec2], x2: &[Vec2]) -> Option<Pose> {
+    if x1.len() != x2.len() || e.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    // As in decompose_essential: an exact power-of-two scale keeps the products in range.
+    let e = e * power_of_two_normalizer(max_abs(e.iter()));
+    let cols = [e.column(0), e.column(1), e.column(2)];
+    let crosses = [
+        cols[0].cross(&cols[1]),
+        cols[0].cross(&cols[2]),
+        cols[1].cross(&cols[2]),
+    ];
+    let t = crosses
+        .iter()
+        .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))?;
+    let widest = cols
+        .iter()
+        .max_by(|a, b| a.norm_squared().total_cmp(&b.norm_squared()))?;
+    // Rank 2 or nothing: E = [t]× R has a cross product of norm ≥ σ²/√3 (the columns are
+    // t × rᵢ, so their cross products are ±t (t·rₖ)), a rank-1 E only rounding.
+    if t.norm() <= 1e-8 * widest.norm_squared() {
+        return None;
+    }
+    let u3 = t.normalize();
+    let u1 = (widest - u3 * widest.dot(&u3)).try_normalize(0.0)?;
+    let u2 = u3.cross(&u1);
+    let v1 = (e.transpose() * u1).try_normalize(0.0)?;
+    let v2 = e.transpose() * u2;
+    let v2 = (v2 - v1 * v2.dot(&v1)).try_normalize(0.0)?;
+    let v3 = v1.cross(&v2);
+    let v = Mat3::from_columns(&[v1, v2, v3]);
+    // U W and U Wᵀ, W the quarter turn of decompose_essential, U = [u₁ u₂ u₃].
+    let (uw, uwt) = (
+        Mat3::from_columns(&[u2, -u1, u3]),
+        Mat3::from_columns(&[-u2, u1, u3]),
+    );
+    let (r1, r2) = (uw * v.transpose(), uwt * v.transpose());
+    [(r1, u3), (r1, -u3), (r2, u3), (r2, -u3)]
+        .into_iter()
+        .map(|(r, t)| Pose { r, t })
+        .find(|pose| {
+            x1.iter()
+                .zip(x2)
+                .all(|(a, b)| cheirality(pose, a, b) == Cheirality::InFront)
+        })
+}
+
 /// Depths (λ1, λ2) of the point seen at normalised x1, x2 under `pose`, from the least-squares
 /// solution of λ2·x̂2 = λ1·R·x̂1 + t (the midpoint form, exact for noise-free data).
 /// Returns `None` when the rays are parallel.
@@ -209,8 +285,8 @@ pub fn pose_from_essential(e: &Mat3, x1: &[Vec2], x2: &[Vec2]) -> Result<(Pose, 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synthetic::{random_pose, random_rotation};
-    use rand::SeedableRng;
+    use crate::synthetic::{general_points, random_pose, random_rotation};
+    use rand::{Rng, SeedableRng};
 
     #[test]
     fn decomposition_contains_the_true_pose_and_cheirality_finds_it() {
@@ -262,6 +338,69 @@ mod tests {
         let e = random_pose(&mut rng).essential();
         let f = fundamental_from_essential(&e, &k1, &k2);
         assert!((essential_from_fundamental(&f, &k1, &k2) - e).norm() < 1e-12);
+    }
+
+    #[test]
+    fn closed_form_factorisation_agrees_with_the_svd() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+        for trial in 0..2000 {
+            let truth = random_pose(&mut rng);
+            let n = 1 + trial % 6;
+            let (x1, x2) = general_points(&mut rng, &truth, n);
+            // Any scale and sign, and the rounding of a minimal solver's E.
+            let scale = 10f64.powi(rng.random_range(-150..150)) * [1.0, -1.0][trial % 2];
+            let jitter = Mat3::from_fn(|_, _| rng.random_range(-1e-13..1e-13));
+            let e = (truth.essential() / truth.t.norm() + jitter) * scale;
+            let fast = pose_with_all_in_front(&e, &x1, &x2).expect("the truth is a candidate");
+            let (svd, count) = pose_from_essential(&e, &x1, &x2).unwrap();
+            assert_eq!(count, n);
+            assert!((fast.r - svd.r).norm() < 1e-10, "trial {trial}");
+            assert!((fast.t - svd.t).norm() < 1e-10, "trial {trial}");
+            assert!((fast.r.transpose() * fast.r - Mat3::identity()).norm() < 1e-14);
+            assert!((fast.r.determinant() - 1.0).abs() < 1e-14);
+            assert!(
+                (fast.t - truth.t.normalize()).norm() < 1e-9,
+                "trial {trial}"
+            );
+            assert!((fast.r - truth.r).norm() < 1e-9, "trial {trial}");
+        }
+    }
+
+    #[test]
+    fn closed_form_factorisation_rejects_what_it_cannot_factor() {
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(8);
+        let truth = random_pose(&mut rng);
+        let (x1, x2) = general_points(&mut rng, &truth, 5);
+        let e = truth.essential();
+        assert!(pose_with_all_in_front(&e, &x1, &x2).is_some());
+        // A point behind both cameras is in front of both under (R, −t), the others only under
+        // (R, t): no factorisation keeps them all in front.
+        let behind = loop {
+            let xw = Vec3::new(
+                rng.random_range(-2.0..2.0),
+                rng.random_range(-2.0..2.0),
+                -4.0,
+            );
+            let xc2 = truth.r * xw + truth.t;
+            if xc2.z < -0.1 {
+                break (
+                    Vec2::new(xw.x / xw.z, xw.y / xw.z),
+                    Vec2::new(xc2.x / xc2.z, xc2.y / xc2.z),
+                );
+            }
+        };
+        let (mut y1, mut y2) = (x1.clone(), x2.clone());
+        y1.push(behind.0);
+        y2.push(behind.1);
+        assert!(pose_from_essential(&e, &y1, &y2).unwrap().1 < y1.len());
+        assert!(pose_with_all_in_front(&e, &y1, &y2).is_none());
+        let alone = pose_with_all_in_front(&e, &y1[5..], &y2[5..]).unwrap();
+        assert!((alone.t + truth.t.normalize()).norm() < 1e-9);
+        assert!(pose_with_all_in_front(&Mat3::zeros(), &x1, &x2).is_none());
+        assert!(pose_with_all_in_front(&Mat3::from_element(f64::NAN), &x1, &x2).is_none());
+        let rank_one = e.column(0) * e.row(0);
+        assert!(pose_with_all_in_front(&rank_one, &x1, &x2).is_none());
+        assert!(pose_with_all_in_front(&e, &x1, &x2[..4]).is_none());
     }
 
     #[test]

@@ -205,6 +205,30 @@ pub fn random_pose<R: Rng + ?Sized>(rng: &mut R) -> Pose {
     }
 }
 
+/// `n` exact normalised point correspondences of random 3D points in general position under
+/// `pose`: depth 2–8 in camera 1 within a ±0.6 × ±0.45 field of view, and in front of camera 2.
+pub fn general_points<R: Rng + ?Sized>(
+    rng: &mut R,
+    pose: &Pose,
+    n: usize,
+) -> (Vec<Vec2>, Vec<Vec2>) {
+    let (mut x1, mut x2) = (Vec::new(), Vec::new());
+    while x1.len() < n {
+        let z = rng.random_range(2.0..8.0);
+        let p = Vec3::new(
+            rng.random_range(-0.6..0.6) * z,
+            rng.random_range(-0.45..0.45) * z,
+            z,
+        );
+        let q = pose.r * p + pose.t;
+        if q.z > 0.1 {
+            x1.push(Vec2::new(p.x / p.z, p.y / p.z));
+            x2.push(Vec2::new(q.x / q.z, q.y / q.z));
+        }
+    }
+    (x1, x2)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

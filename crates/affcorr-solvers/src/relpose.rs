@@ -21,7 +21,8 @@ use crate::essential::{
 use affcorr_geom::{AffineCorrespondence, Mat3, Vec2};
 
 pub use affcorr_geom::epipolar::{
-    Pose, count_in_front, decompose_essential, pose_from_essential, triangulate_depths,
+    Pose, count_in_front, decompose_essential, pose_from_essential, pose_with_all_in_front,
+    triangulate_depths,
 };
 
 /// Largest number of poses [`relative_pose_5pt`] writes.
@@ -32,12 +33,20 @@ pub const RELPOSE_2AC_MAX_SOLUTIONS: usize = ESSENTIAL_2AC_MAX_SOLUTIONS;
 pub const RELPOSE_1AC2PT_MAX_SOLUTIONS: usize = ESSENTIAL_1AC2PT_MAX_SOLUTIONS;
 
 /// Keeps the poses of `es` whose best factorisation has at least `need` of the sample in front
-/// of both cameras.
+/// of both cameras. The minimal solvers need the whole sample in front; their E are essential up
+/// to rounding, so the closed-form factorisation serves them (the SVD's projection only for the
+/// over-determined fit).
 fn poses_in_front(es: &[Mat3], x1: &[Vec2], x2: &[Vec2], need: usize, out: &mut [Pose]) -> usize {
     let mut n = 0;
     for e in es {
-        if let Ok((pose, count)) = pose_from_essential(e, x1, x2)
-            && count >= need
+        let pose = if need == x1.len() {
+            pose_with_all_in_front(e, x1, x2)
+        } else {
+            pose_from_essential(e, x1, x2)
+                .ok()
+                .and_then(|(pose, count)| (count >= need).then_some(pose))
+        };
+        if let Some(pose) = pose
             && n < out.len()
         {
             out[n] = pose;

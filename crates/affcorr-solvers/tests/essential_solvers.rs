@@ -4,7 +4,7 @@
 mod common;
 use affcorr_geom::camera::normalize_ac;
 use affcorr_geom::epipolar::Pose;
-use affcorr_geom::synthetic::{PlaneScene, random_pose, random_unit};
+use affcorr_geom::synthetic::{PlaneScene, general_points, random_pose, random_unit};
 use affcorr_geom::{AffineCorrespondence, Mat2, Mat3, Vec2, Vec3};
 use affcorr_solvers::essential::*;
 use affcorr_solvers::relpose::*;
@@ -23,26 +23,6 @@ fn plane_acs(rng: &mut Pcg64, n: usize) -> (PlaneScene, Vec<AffineCorrespondence
         .map(|ac| normalize_ac(ac, &scene.k1, &scene.k2))
         .collect();
     (scene, acs)
-}
-
-/// `n` exact normalised point correspondences of random 3D points (depth 2–8, in front of both
-/// cameras).
-fn general_points(rng: &mut Pcg64, pose: &Pose, n: usize) -> (Vec<Vec2>, Vec<Vec2>) {
-    let (mut x1, mut x2) = (Vec::new(), Vec::new());
-    while x1.len() < n {
-        let z = rng.random_range(2.0..8.0);
-        let p = Vec3::new(
-            rng.random_range(-0.6..0.6) * z,
-            rng.random_range(-0.45..0.45) * z,
-            z,
-        );
-        let q = pose.r * p + pose.t;
-        if q.z > 0.1 {
-            x1.push(Vec2::new(p.x / p.z, p.y / p.z));
-            x2.push(Vec2::new(q.x / q.z, q.y / q.z));
-        }
-    }
-    (x1, x2)
 }
 
 /// Asserts that at least 99% of the errors are below 1e-8 and reports the rate.
