@@ -342,15 +342,17 @@ pub fn sampson_affine_grad(f: &Mat3, ac: &AffineCorrespondence) -> [AffineSampso
 /// The signed affine Sampson residuals s_k = r_k / √G_k (so s_k² = SD_A,k) and their gradients
 /// w.r.t. F (row-major), for least squares over F: ∂s_k = ∂r_k / √G_k − r_k ∂(G_k/2) / G_k^{3/2},
 /// with ∂r_k and ∂G_k/2 as in the module docs. A row with G_k = 0 gives (0, zeros).
-#[inline]
+///
+/// Branch-free (the degenerate row is a select), and always inlined, so that the refinements'
+/// loops over blocks of ACs vectorise.
+#[inline(always)]
 pub fn sampson_affine_signed_grad_f(f: &Mat3, ac: &AffineCorrespondence) -> [(f64, [f64; 9]); 2] {
     let t = affine_terms(f, ac);
     std::array::from_fn(|k| {
-        let (r, g) = (t.r[k], t.g[k]);
-        if !(g > 0.0) {
-            return (0.0, [0.0; 9]);
-        }
-        let inv = 1.0 / g.sqrt();
+        let g = t.g[k];
+        let usable = g > 0.0;
+        let r = if usable { t.r[k] } else { 0.0 };
+        let inv = if usable { 1.0 / g.sqrt() } else { 0.0 };
         let c = r * inv * inv * inv; // r / G^{3/2}
         let (fe, l1, b) = (&t.f, &t.l1, &t.b[k]);
         let mut d_f = [0.0; 9];

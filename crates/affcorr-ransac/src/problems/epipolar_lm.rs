@@ -15,7 +15,7 @@
 
 use super::Correspondences;
 use super::normal_eq::EntrySums;
-use super::simd::{BLOCK, Lanes, add_sums, dispatch};
+use super::simd::{BLOCK, Lanes, add_sums, dispatch, gather};
 use crate::loss::Loss;
 use crate::refine::{Mat9, Vec9};
 use affcorr_geom::Mat3;
@@ -159,7 +159,9 @@ pub(crate) fn affine_cost(
 }
 
 /// [`normal_equations`] of the affine terms: adds their JᵀWJ and JᵀWr for the tangent `basis`
-/// and returns their cost.
+/// and returns their cost. Blocked like [`normal_equations`]: each block's ACs are gathered,
+/// their two signed residuals and gradients computed lane-wise, the loss per AC, and the sums
+/// (both rows of an AC into the same 54) as dot products over the block.
 pub(crate) fn affine_normal_equations(
     data: &Correspondences,
     f: &Mat3,
@@ -170,22 +172,72 @@ pub(crate) fn affine_normal_equations(
     jtr: &mut Vec9,
 ) -> f64 {
     let mut sums = EntrySums::new();
+    let cost = dispatch(
+        #[inline(always)]
+        || accumulate_affine(data, f, indices, terms, &mut sums.g_sum, &mut sums.gg),
+    );
+    sums.project(&flat(basis)[..basis.len()], jtj, jtr);
+    cost
+}
+
+/// The affine counterpart of [`accumulate`]: Σ c ρ_A over `indices`, and the sums of Σ w s g
+/// and Σ w g gᵀ of both affine rows, w = c λ ρ_A′ (an AC with c ≤ 0 adds nothing).
+#[inline(always)]
+fn accumulate_affine(
+    data: &Correspondences,
+    f: &Mat3,
+    indices: &[usize],
+    terms: &AffineTerms<'_>,
+    g_sum: &mut [f64; 9],
+    gg: &mut [f64; 45],
+) -> f64 {
     let mut cost = 0.0;
-    for &i in indices {
-        let c = terms.confidence(i);
-        if c <= 0.0 {
-            continue;
+    let mut s = [[0.0; BLOCK]; 2];
+    let mut g = [[[0.0; BLOCK]; 9]; 2];
+    let (mut w, mut wr) = ([[0.0; BLOCK]; 2], [[0.0; BLOCK]; 2]);
+    let (mut g_lanes, mut gg_lanes) = ([Lanes::default(); 9], [Lanes::default(); 45]);
+    for chunk in indices.chunks(BLOCK) {
+        let acs = gather(chunk, |i| data.ac(i));
+        for (j, ac) in acs.iter().enumerate() {
+            let rows = sampson_affine_signed_grad_f(f, ac);
+            for (k, (sk, gk)) in rows.iter().enumerate() {
+                s[k][j] = *sk;
+                for a in 0..9 {
+                    g[k][a][j] = gk[a];
+                }
+            }
         }
-        let terms_of_ac = sampson_affine_signed_grad_f(f, &data.ac(i));
-        let (rho, w) = terms
-            .loss
-            .total_cost_and_weights(&terms_of_ac.each_ref().map(|(s, _)| terms.lambda * s * s));
-        cost += c * rho;
-        for ((s, g), w) in terms_of_ac.iter().zip(w) {
-            sums.add(g, c * w * terms.lambda, *s);
+        for j in 0..BLOCK {
+            let c = chunk.get(j).map_or(0.0, |&i| terms.confidence(i));
+            if c <= 0.0 {
+                // Also the tail of a short last block (its gathered copies must not count).
+                for k in 0..2 {
+                    (w[k][j], wr[k][j]) = (0.0, 0.0);
+                }
+                continue;
+            }
+            let sq = [s[0][j], s[1][j]].map(|sk| terms.lambda * sk * sk);
+            let (rho, wk) = terms.loss.total_cost_and_weights(&sq);
+            cost += c * rho;
+            for k in 0..2 {
+                w[k][j] = c * wk[k] * terms.lambda;
+                wr[k][j] = w[k][j] * s[k][j];
+            }
+        }
+        for k in 0..2 {
+            let mut n = 0;
+            for a in 0..9 {
+                g_lanes[a].add_dot(&wr[k], &g[k][a]);
+                let wg: [f64; BLOCK] = std::array::from_fn(|j| w[k][j] * g[k][a][j]);
+                for b in a..9 {
+                    gg_lanes[n].add_dot(&wg, &g[k][b]);
+                    n += 1;
+                }
+            }
         }
     }
-    sums.project(&flat(basis)[..basis.len()], jtj, jtr);
+    add_sums(g_sum, &g_lanes);
+    add_sums(gg, &gg_lanes);
     cost
 }
 

@@ -20,8 +20,9 @@ impl EntrySums {
         }
     }
 
-    /// Adds one residual `r` with gradient `g` and weight `w`.
-    #[inline]
+    /// Adds one residual `r` with gradient `g` and weight `w` (the reference the blocked
+    /// kernels are tested against).
+    #[cfg(test)]
     pub(crate) fn add(&mut self, g: &[f64; 9], w: f64, r: f64) {
         let mut k = 0;
         for a in 0..9 {
