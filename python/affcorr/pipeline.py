@@ -138,8 +138,10 @@ class MatchResult:
             screened group of tilts or tiles, else None),
             ``seconds``, ``work`` (what it took from ``view_relative_budget``, in plain
             passes: counted, not timed, so the same pair runs the same views on any machine;
-            the views' work sums to the cascade's, the last view's including any screening
-            after it that the budget cut short),
+            the views' work sums to the pair's, the last view's including any screening
+            after it that the budget cut short), ``started`` (the cascade's work when the view
+            started, its group's screen included: what the budget was compared with, so the
+            view runs under any ``view_relative_budget`` above it; 0 for the plain pass),
             ``used``: whether its ACs are the result's); empty when the cascade did not run
             (``views="off"``, dense matchers).
     """

@@ -759,6 +759,7 @@ impl Pipeline {
             screen: None,
             time: start.elapsed(),
             work: 1.0,
+            started: 0.0,
             used: false,
         }];
         // The meter's reading at the last report (the plain pass's verification is the plain
@@ -908,6 +909,7 @@ impl Pipeline {
                 break;
             };
             tried += 1;
+            let started = store.meter.passes();
             let t = Instant::now();
             let warps = view.warps(sizes.0, sizes.1);
             let [a_warp, b_warp] = warps;
@@ -972,6 +974,7 @@ impl Pipeline {
                 screen: screen_score,
                 time: t.elapsed() + std::mem::take(&mut screen_time),
                 work: store.meter.in_passes(store.meter.spent - reported),
+                started,
                 used: false,
             });
             reported = store.meter.spent;
@@ -1022,9 +1025,9 @@ impl Pipeline {
             }
         }
         // Work spent after the last view (a group's extractions and screens when the budget
-        // stopped the cascade before any of its views ran) is the last view's: the views'
-        // work sums to the cascade's (the plain pass's stays 1).
-        if let [_, .., last] = reports.as_mut_slice() {
+        // stopped the cascade before any of its views ran) is the last view's, the plain
+        // pass's when no view ran: the views' work sums to the pair's.
+        if let Some(last) = reports.last_mut() {
             last.work += store.meter.in_passes(store.meter.spent - reported);
         }
         reports[best_index].used = true;

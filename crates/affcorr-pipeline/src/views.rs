@@ -598,10 +598,15 @@ pub struct ViewReport {
     pub time: Duration,
     /// The work it took from [`ViewOptions::relative_budget`], in plain passes (the plain
     /// pass: 1): its extractions, its group's screen when it is the first of the group to run,
-    /// its matching and its ACs; counted, not timed. The last view also carries what was
-    /// spent after it (a group's extractions and screens when the budget stopped the cascade
-    /// before any of its views ran), so that the views' work sums to the cascade's.
+    /// its matching and its ACs; counted, not timed. The last view (the plain pass when no
+    /// view ran) also carries what was spent after it (a group's extractions and screens when
+    /// the budget stopped the cascade before any of its views ran), so that the views' work
+    /// sums to the pair's.
     pub work: f64,
+    /// The work spent when it started, in plain passes (the plain pass: 0), its group's
+    /// screen included: what [`ViewOptions::relative_budget`] was compared with. The view runs
+    /// under any budget above it, so one cascade run tells which views a smaller budget runs.
+    pub started: f64,
     /// Whether its ACs are the result's (one view of a cascade; a verified view with the most
     /// inliers is not used when it fell short of a rival's margin, [`RIVAL_MARGIN`]).
     pub used: bool,

@@ -99,6 +99,12 @@ fn check_with(p: &Pipeline, a: &GrayImage, b: &GrayImage, gt: &Mat3, what: &str,
     let median = aff[aff.len() / 2];
     let tried: Vec<String> = m.views.iter().map(|v| v.view.label()).collect();
     let work: f64 = m.views.iter().map(|v| v.work).sum();
+    // Each view started where the work before it (and its group's screen) left the cascade.
+    let started: Vec<f64> = m.views.iter().map(|v| v.started).collect();
+    assert!(
+        started[0] == 0.0 && started.windows(2).all(|w| w[0] <= w[1]) && started[1] > 0.0,
+        "{what}: {started:?}"
+    );
     eprintln!(
         "{what}: views off: corner error {off_err:.1} px; auto: {} via {:?} ({} inliers), \
          corner error {err:.2} px, median A error {median:.4}, views tried {tried:?}, {:?}, \
