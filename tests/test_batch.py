@@ -198,6 +198,18 @@ def test_resume_after_an_interrupted_run(images, serial, tmp_path) -> None:
     changed = dict(OPTIONS, max_keypoints=128)
     s = batch.run(pairs[:2], folder, tmp_path, workers=1, resume=True, progress=False, **changed)
     assert (s.skipped, s.matched) == (0, 2)
+    # The view cascade's budget is an option like any other: the batch's default spelled out
+    # is the default, another budget redoes the pairs.
+    default_budget = dict(OPTIONS, view_relative_budget=batch.BATCH_VIEW_RELATIVE_BUDGET)
+    s = batch.run(
+        pairs[2:], folder, tmp_path, workers=1, resume=True, progress=False, **default_budget
+    )
+    assert (s.skipped, s.matched) == (len(pairs) - 2, 0)
+    other_budget = dict(OPTIONS, view_relative_budget=5.0)
+    s = batch.run(
+        pairs[2:4], folder, tmp_path, workers=1, resume=True, progress=False, **other_budget
+    )
+    assert (s.skipped, s.matched) == (0, 2)
 
 
 def test_resume_after_the_driver_is_killed(images, serial, tmp_path) -> None:
@@ -288,6 +300,8 @@ def test_bad_arguments_name_themselves(images, tmp_path) -> None:
         batch.run(["view0.png"], folder, tmp_path)
     with pytest.raises(FileNotFoundError, match="image_dir"):
         batch.run([(names[0], names[1])], tmp_path / "nope", tmp_path)
+    with pytest.raises(ValueError, match="view_relative_budget"):
+        batch.run([(names[0], names[1])], folder, tmp_path, view_relative_budget=0.0)
     with pytest.raises(ValueError, match="ship_images: .*ray_address"):
         batch.run([(names[0], names[1])], folder, tmp_path, ship_images=True)
     cams = tmp_path / "cams.txt"

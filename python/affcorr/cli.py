@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ._logging import configure_cli, logger
+from .batch import BATCH_VIEW_RELATIVE_BUDGET
 from .metrics import corner_error
 from .pipeline import MATCHERS, PIPELINE_DEFAULTS
 
@@ -551,6 +552,7 @@ def cmd_batch(args) -> int:
         detection_threshold=args.detection_threshold,
         max_side=args.max_side,
         views=args.views,
+        view_relative_budget=args.view_relative_budget,
         refine_affine=args.refine_affine,
         shape_model=args.shape_model,
         geometry=geometry,
@@ -721,6 +723,15 @@ def build_parser() -> argparse.ArgumentParser:
     _add_detection_threshold(p)
     p.add_argument("--max-side", type=int, default=None, help="working resolution (px)")
     p.add_argument("--views", choices=["auto", "full", "off"], default=PIPELINE_DEFAULTS["views"])
+    p.add_argument(
+        "--view-relative-budget",
+        type=lambda v: None if v.lower() == "none" else float(v),
+        default=BATCH_VIEW_RELATIVE_BUDGET,
+        help="the view cascade starts no new view once a pair has done this many times the "
+        "plain pass's work; a pair that does not overlap spends all of it ('none': no limit; "
+        "default: %(default)s, lower than a single pair's "
+        f"{PIPELINE_DEFAULTS['view_relative_budget']:g}: see docs/scale.md)",
+    )
     p.add_argument(
         "--refine-affine",
         action=argparse.BooleanOptionalAction,

@@ -12,6 +12,11 @@ documents the layout.
   (:meth:`affcorr.Pipeline.extract`) are computed once and kept, in each worker's memory and in
   ``<output>/cache`` (shared by the workers when it is on a shared file system); every pair is
   then :meth:`affcorr.Pipeline.match_features`, whose result equals ``match_pair``'s bit for bit.
+- **Pairs that do not overlap** cost the view cascade's whole budget (it finds nothing to
+  stop at), so a batch runs it at ``view_relative_budget=BATCH_VIEW_RELATIVE_BUDGET`` (12
+  plain passes of work; a single pair's default is 30): every rotated pair and nearly every
+  steep tilt still solved, the strong zooms that only magnified tiles solve given up
+  (benches/results/views_budget.md, docs/scale.md).
 - **Local or Ray**: by default a process per core (``workers``), each running the pipeline with
   ``threads_per_worker`` threads (ONNX Runtime and rayon); with ``ray_address`` (``--ray``) the
   chunks of ``chunk_size`` pairs are Ray tasks on an existing cluster, the model files shipped
@@ -36,9 +41,10 @@ documents the layout.
 """
 
 from ._inputs import Camera, default_camera, names_to_pair, read_cameras, read_pairs
-from ._run import GEOMETRIES, BatchSummary, run
+from ._run import BATCH_VIEW_RELATIVE_BUDGET, GEOMETRIES, BatchSummary, run
 
 __all__ = [
+    "BATCH_VIEW_RELATIVE_BUDGET",
     "GEOMETRIES",
     "BatchSummary",
     "Camera",

@@ -33,6 +33,14 @@ logger = logging.getLogger("affcorr.batch")
 #: The geometries a batch can estimate per pair.
 GEOMETRIES = ("homography", "fundamental", "relative_pose")
 
+#: The view cascade's relative budget in a batch (``view_relative_budget``; the pipeline's own
+#: default is ``PIPELINE_DEFAULTS["view_relative_budget"]``): a pair list holds pairs that do
+#: not overlap, and the cascade spends its whole budget on each of them. At 12 plain passes it
+#: still runs the rotations, the zooms by ½ and ¼ and the first tilt groups, which solved
+#: every rotated pair and 39 of 40 steep tilts, and gives up the magnified tiles of strong
+#: zooms (benches/results/views_budget.md).
+BATCH_VIEW_RELATIVE_BUDGET = 12.0
+
 # Bump when the records' content changes: old outputs are then recomputed on resume.
 _FORMAT = 1
 
@@ -127,6 +135,7 @@ def run(
     max_matches: int | None = None,
     max_side: int | None = None,
     views: str | None = None,
+    view_relative_budget: float | None = BATCH_VIEW_RELATIVE_BUDGET,
     refine_affine: bool | None = None,
     seed: int = 0,
     models_dir: str | os.PathLike[str] | None = None,
@@ -220,6 +229,9 @@ def run(
     ):
         if v is not None:
             pipeline_kwargs[k] = v
+    # Always given (None is "no limit", not "the default"): the batch's default differs from
+    # the pipeline's (BATCH_VIEW_RELATIVE_BUDGET).
+    pipeline_kwargs["view_relative_budget"] = view_relative_budget
     probe = Pipeline(threads=1, models_dir=models_dir, **pipeline_kwargs)
     models = {k: Path(v) for k, v in probe.models.items()}
     # The effective options, not the given ones: the checksum (and so resume) must not depend
@@ -249,7 +261,12 @@ def run(
         _FORMAT, __version__, pipeline_kwargs, model_digests, list(geometry),
         {g: thr[g] for g in geometry}, snap_px,
     )  # fmt: skip
-    features_key = digest(_FORMAT, pipeline_kwargs, model_digests)
+    # The features do not depend on how far the view cascade may go.
+    features_key = digest(
+        _FORMAT,
+        {k: v for k, v in pipeline_kwargs.items() if k != "view_relative_budget"},
+        model_digests,
+    )
 
     # Checksums of every image and pair.
     digests = {n: file_digest(image_dir / n) for n in names}

@@ -1,0 +1,58 @@
+"""The view-budget benchmark's premise (benches/affcorr_bench/views_budget.py): one run of the
+cascade at a large budget tells what any smaller budget would have run, because the budget only
+decides where the cascade stops. Checked against the pipeline itself on a pair with nothing to
+find (graffiti against noise), where the cascade runs until its budget is spent."""
+
+from __future__ import annotations
+
+import affcorr
+import numpy as np
+import pytest
+from affcorr_bench.views_budget import cost_at, solved_after
+
+
+@pytest.fixture(scope="module")
+def unrelated_views():
+    pytest.importorskip("PIL.Image", reason="the sample image is read with Pillow")
+    from affcorr.data import graffiti
+    from PIL import Image
+
+    a = np.asarray(Image.fromarray(graffiti()[0]).convert("L").resize((320, 256)))
+    rng = np.random.default_rng(0)
+    b = rng.integers(0, 256, (256, 320), dtype=np.uint8)
+
+    def run(budget: float) -> list[dict]:
+        pipe = affcorr.Pipeline(max_keypoints=256, threads=2, view_relative_budget=budget)
+        return pipe.match_pair(a, b).views
+
+    return run
+
+
+def test_a_smaller_budget_runs_the_views_a_larger_one_started_below_it(unrelated_views):
+    long = unrelated_views(12.0)
+    assert not any(v["verified"] for v in long)
+    assert cost_at(long, float("inf")) >= 12.0  # nothing verified: the budget was spent
+    started = [v["started"] for v in long]
+    assert started[0] == 0.0 and started == sorted(started)
+    for budget in (2.0, 5.0, 8.0):
+        short = unrelated_views(budget)
+        ran = [v["label"] for v in long if v["started"] < budget]
+        assert [v["label"] for v in short] == ran
+        assert [v["started"] for v in short] == pytest.approx(started[: len(ran)], rel=1e-12)
+        total = sum(v["work"] for v in short)  # the plain pass's 1 included
+        assert total == pytest.approx(cost_at(long, budget), rel=1e-9)
+
+
+def test_the_budget_a_pair_needs_is_where_its_used_view_started():
+    views = [
+        {"label": "plain", "work": 1.0, "started": 0.0, "used": False},
+        {"label": "B rot 90°", "work": 3.5, "started": 2.5, "used": False},
+        {"label": "A zoom 0.5", "work": 0.5, "started": 3.5, "used": True},
+    ]
+    assert solved_after(views) == 3.5
+    assert solved_after(views[:1]) == 0.0
+    # The rotations' group screen (2.5 passes) is spent before the budget is checked again.
+    assert cost_at(views, 1.0) == 1.0 + 2.5
+    assert cost_at(views, 3.0) == 1.0 + 3.5
+    assert cost_at(views, 4.0) == 1.0 + 4.0
+    assert cost_at(views[:1], 4.0) == 1.0
