@@ -32,6 +32,7 @@ def files(tmp_path):
     (tmp_path / "words.txt").write_text("a b c\nd e f\ng h i\n")
     (tmp_path / "pairs.txt").write_text(f"{A}\n")
     (tmp_path / "missing_pairs.txt").write_text(f"{A} {tmp_path / 'nope.png'}\n")
+    (tmp_path / "graffiti_pairs.txt").write_text("graf1.png graf3.png\n")
     return tmp_path
 
 
@@ -58,6 +59,20 @@ CASES = {
         "max_keypoints must be a positive int",
     ),
     "match: --threads 0": (["match", A, B, "-o", "{d}/x.npz", "--threads", "0"], "threads"),
+    "batch: --view-relative-budget 0": (
+        [
+            "batch",
+            "{d}/graffiti_pairs.txt",
+            str(G),
+            "-o",
+            "{d}/out",
+            "--matcher",
+            "xfeat",
+            "--view-relative-budget",
+            "0",
+        ],
+        "view_relative_budget must be a positive number",
+    ),
     "match: --max-side 5": (["match", A, B, "-o", "{d}/x.npz", "--max-side", "5"], "max_side"),
     "homography: missing --gt": (
         ["homography", A, B, "--gt", "{d}/nope.txt", *FAST],
@@ -133,3 +148,14 @@ def test_argparse_errors_exit_2_with_usage(capsys, args):
     assert info.value.code == 2
     err = capsys.readouterr().err
     assert "usage: affcorr" in err and "error:" in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    "command", [["match", A, B, "-o", "x.npz"], ["batch", "p.txt", "i", "-o", "o"]]
+)
+def test_a_view_budget_that_is_not_a_number_is_named(capsys, command):
+    with pytest.raises(SystemExit) as info:
+        cli.main([*command, "--view-relative-budget", "abc"])
+    assert info.value.code == 2
+    err = capsys.readouterr().err
+    assert "--view-relative-budget: 'abc' is not a number of plain passes or 'none'" in err, err

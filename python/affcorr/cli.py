@@ -118,6 +118,18 @@ def _pipeline(args):
     )
 
 
+def _budget(value: str) -> float | None:
+    """A relative view budget on the command line: a number, or 'none' (no limit)."""
+    if value.lower() == "none":
+        return None
+    try:
+        return float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{value!r} is not a number of plain passes or 'none'"
+        ) from None
+
+
 def _add_detection_threshold(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--detection-threshold",
@@ -202,7 +214,7 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument(
         "--view-relative-budget",
-        type=lambda v: None if v.lower() == "none" else float(v),
+        type=_budget,
         default=PIPELINE_DEFAULTS["view_relative_budget"],
         help="the view cascade starts no new view once it has done this many times the plain "
         "pass's work, counted, not timed ('none': no limit; default: %(default)s)",
@@ -725,7 +737,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--views", choices=["auto", "full", "off"], default=PIPELINE_DEFAULTS["views"])
     p.add_argument(
         "--view-relative-budget",
-        type=lambda v: None if v.lower() == "none" else float(v),
+        type=_budget,
         default=BATCH_VIEW_RELATIVE_BUDGET,
         help="the view cascade starts no new view once a pair has done this many times the "
         "plain pass's work; a pair that does not overlap spends all of it ('none': no limit; "
