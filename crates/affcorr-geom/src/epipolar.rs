@@ -99,7 +99,8 @@ pub fn decompose_essential(e: &Mat3) -> Result<[Pose; 4]> {
 
 /// The factorisation of an essential matrix `e` that puts every correspondence (normalised
 /// coordinates) in front of both cameras, or `None` when none does (or `e` is not finite or has
-/// rank below 2). Ties go to the first candidate in [`decompose_essential`]'s order.
+/// rank below 2). Generic data leave one such factorisation; where degenerate data leave more,
+/// which one is returned is unspecified (the signs of u₃ below are not the SVD's).
 ///
 /// Meant for the minimal solvers' E, which are essential up to rounding: instead of an SVD it
 /// builds the bases in closed form. E = \[t\]× R has equal singular values σ and left null
