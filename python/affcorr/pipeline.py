@@ -476,7 +476,14 @@ class Pipeline:
         the matcher): ``error`` is the exception :meth:`match_pair` would raise, its message
         prefixed ``pairs[i]: ``. The other pairs are kept. ``on_error="raise"`` raises the first
         failing pair's exception instead. An item that is not a pair raises either way. Ctrl-C
-        starts no further pair and raises ``KeyboardInterrupt`` once the running ones end."""
+        starts no further pair and raises ``KeyboardInterrupt`` once the running ones end.
+
+        A pair that does not overlap runs the view cascade until ``view_relative_budget`` is
+        spent (about 31 plain passes at the default 30): for a list with many such pairs,
+        construct the pipeline with ``view_relative_budget=affcorr.batch.
+        BATCH_VIEW_RELATIVE_BUDGET`` (12: every rotated pair and nearly every steep tilt
+        still solved, about 13.5 passes on a pair without overlap;
+        benches/results/views_budget.md), as ``affcorr batch`` does."""
         _check_on_error(on_error)
         items = []
         # One conversion per distinct image object, so that Rust sees one buffer per image and
