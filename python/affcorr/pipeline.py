@@ -479,11 +479,11 @@ class Pipeline:
         starts no further pair and raises ``KeyboardInterrupt`` once the running ones end.
 
         A pair that does not overlap runs the view cascade until ``view_relative_budget`` is
-        spent (about 31 plain passes at the default 30): for a list with many such pairs,
-        construct the pipeline with ``view_relative_budget=affcorr.batch.
-        BATCH_VIEW_RELATIVE_BUDGET`` (12: every rotated pair and nearly every steep tilt
-        still solved, about 13.5 passes on a pair without overlap;
-        benches/results/views_budget.md), as ``affcorr batch`` does."""
+        spent (about 31 plain passes at the default 30). For a list with many such pairs,
+        give the pipeline the batch's budget, as ``affcorr batch`` does:
+        ``view_relative_budget=affcorr.batch.BATCH_VIEW_RELATIVE_BUDGET`` (12: every rotated
+        pair and nearly every steep tilt still solved, about 13.5 passes on a pair without
+        overlap; benches/results/views_budget.md)."""
         _check_on_error(on_error)
         items = []
         # One conversion per distinct image object, so that Rust sees one buffer per image and
