@@ -36,29 +36,19 @@ OUT = common.RESULTS / "batch_mixed.md"
 
 
 def _unrelated_images(folder: Path, n_pairs: int) -> list[tuple[str, str]]:
-    """``n_pairs`` pairs of different textures written as PNG files into ``folder``."""
-    from affcorr.train.sources import textures
+    """``n_pairs`` pairs of different textures (eval.data.unrelated_pairs) written as PNG
+    files into ``folder``."""
     from PIL import Image
 
-    from .eval.data import _fit, _u8
+    from .eval.data import _u8, unrelated_pairs
 
-    tex = dict(textures("train")) | dict(textures("val"))
-    names = sorted(tex)
-    rng = np.random.default_rng(5)
-    pairs: set[tuple[str, str]] = set()
-    while len(pairs) < n_pairs:
-        i, j = sorted(rng.choice(len(names), 2, replace=False))
-        if names[i][:3] != names[j][:3]:  # files named alike may show one scene
-            pairs.add((names[i], names[j]))
-    written = set()
     out = []
-    for a, b in sorted(pairs):
-        for n in (a, b):
-            if n not in written:
-                img = _u8(_fit(tex[n], 640)[0])
-                Image.fromarray(np.asarray(img)).save(folder / f"tex_{Path(n).stem}.png")
-                written.add(n)
-        out.append((f"tex_{Path(a).stem}.png", f"tex_{Path(b).stem}.png"))
+    for a, b, img0, img1 in unrelated_pairs(n_pairs):
+        files = (f"tex_{Path(a).stem}.png", f"tex_{Path(b).stem}.png")
+        for f, img in zip(files, (img0, img1)):
+            if not (folder / f).exists():
+                Image.fromarray(_u8(img)).save(folder / f)
+        out.append(files)
     return out
 
 

@@ -44,8 +44,6 @@ BUDGETS = (1, 4, 6, 8, 10, 12, 15, 20, 25, 30)
 
 def _cases(unrelated: int, zoom_seeds: int):
     """(set, pair id, img1, img2, H or None) of every set."""
-    from affcorr.train.sources import textures
-
     from .eval import data
 
     for _, what, pid, a, b, H in V.cases(1, ("rotation",)):
@@ -54,17 +52,8 @@ def _cases(unrelated: int, zoom_seeds: int):
         yield "zoom", f"{pid} {what}", a, b, H
     for p in data.extreme_pairs() + data.extreme_pairs(seed=1, every_held_out=True):
         yield "extreme", p.id, p.img1, p.img2, p.H
-    tex = dict(textures("train")) | dict(textures("val"))
-    names = sorted(tex)
-    rng = np.random.default_rng(5)
-    pairs: set[tuple[str, str]] = set()
-    while len(pairs) < unrelated:
-        i, j = sorted(rng.choice(len(names), 2, replace=False))
-        # Files named alike (pic1, pic3, ...) may show one scene: never paired.
-        if names[i][:3] != names[j][:3]:
-            pairs.add((names[i], names[j]))
-    for a, b in sorted(pairs):
-        yield "unrelated", f"{a} | {b}", data._fit(tex[a], 640)[0], data._fit(tex[b], 640)[0], None
+    for a, b, img0, img1 in data.unrelated_pairs(unrelated):
+        yield "unrelated", f"{a} | {b}", img0, img1, None
 
 
 def solved_after(views: list[dict]) -> float:

@@ -131,6 +131,33 @@ def hpatches_pairs(max_side: int = 512, seed: int = 0, images: int | None = None
     return pairs
 
 
+def unrelated_pairs(
+    n: int, max_side: int = 640, seed: int = 5
+) -> list[tuple[str, str, np.ndarray, np.ndarray]]:
+    """``n`` pairs of different training and held-out textures (affcorr.train.sources), which
+    do not overlap: ``(name0, name1, img0, img1)``, the images float in [0, 1] at most
+    ``max_side`` a side, the pairs drawn with ``seed`` and sorted. Files named alike (pic1,
+    pic3, ...) may show one scene: they are never paired."""
+    from affcorr.train.sources import textures
+
+    tex = dict(textures("train")) | dict(textures("val"))
+    names = sorted(tex)
+    rng = np.random.default_rng(seed)
+    pairs: set[tuple[str, str]] = set()
+    while len(pairs) < n:
+        i, j = sorted(rng.choice(len(names), 2, replace=False))
+        if names[i][:3] != names[j][:3]:
+            pairs.add((names[i], names[j]))
+    fitted: dict[str, np.ndarray] = {}
+
+    def image(name: str) -> np.ndarray:
+        if name not in fitted:
+            fitted[name] = _fit(tex[name], max_side)[0]
+        return fitted[name]
+
+    return [(a, b, image(a), image(b)) for a, b in sorted(pairs)]
+
+
 def extreme_pairs(
     tilts=(50, 60, 70, 80),
     seed: int = 0,
