@@ -68,8 +68,8 @@ def cost_at(views: list[dict], budget: float) -> float:
     screened group, against the work of the views before it, and before each view, against its
     ``started`` (its group's screen included). The plain pass's verification counts towards the
     budget but is in no view's work."""
-    if len(views) <= 1:
-        return 1.0
+    if len(views) <= 1:  # no view ran: the plain pass's work (and any screen after it)
+        return views[0]["work"] if views else 1.0
     cascade = views[1:]
     # What a view with no screen before it started at beyond the views before it.
     verification = min(v["started"] - w for v, w in zip(cascade, _cumulative(cascade)))
