@@ -225,15 +225,7 @@ fn accumulate_affine(
             }
         }
         for k in 0..2 {
-            let mut n = 0;
-            for a in 0..9 {
-                g_lanes[a].add_dot(&wr[k], &g[k][a]);
-                let wg: [f64; BLOCK] = std::array::from_fn(|j| w[k][j] * g[k][a][j]);
-                for b in a..9 {
-                    gg_lanes[n].add_dot(&wg, &g[k][b]);
-                    n += 1;
-                }
-            }
+            add_block(&mut g_lanes, &mut gg_lanes, &w[k], &wr[k], &g[k]);
         }
     }
     add_sums(g_sum, &g_lanes);
@@ -383,19 +375,33 @@ fn accumulate(
         // The tail of a short last block (stale but finite values) must not count.
         w[len..].fill(0.0);
         wr[len..].fill(0.0);
-        let mut k = 0;
-        for a in 0..9 {
-            g_lanes[a].add_dot(&wr, &g[a]);
-            let wg: [f64; BLOCK] = std::array::from_fn(|j| w[j] * g[a][j]);
-            for b in a..9 {
-                gg_lanes[k].add_dot(&wg, &g[b]);
-                k += 1;
-            }
-        }
+        add_block(&mut g_lanes, &mut gg_lanes, &w, &wr, &g);
     }
     add_sums(g_sum, &g_lanes);
     add_sums(gg, &gg_lanes);
     cost
+}
+
+/// Adds a block's Σ w r g (`wr` = w r) to `g_lanes` and the upper triangle of its Σ w g gᵀ
+/// (row-major) to `gg_lanes`, as dot products over the block; `g[a]` is the a-th entry of
+/// every datum's gradient. Lanes whose w is 0 add nothing.
+#[inline(always)]
+fn add_block(
+    g_lanes: &mut [Lanes; 9],
+    gg_lanes: &mut [Lanes; 45],
+    w: &[f64; BLOCK],
+    wr: &[f64; BLOCK],
+    g: &[[f64; BLOCK]; 9],
+) {
+    let mut k = 0;
+    for a in 0..9 {
+        g_lanes[a].add_dot(wr, &g[a]);
+        let wg: [f64; BLOCK] = std::array::from_fn(|j| w[j] * g[a][j]);
+        for b in a..9 {
+            gg_lanes[k].add_dot(&wg, &g[b]);
+            k += 1;
+        }
+    }
 }
 
 #[cfg(test)]
