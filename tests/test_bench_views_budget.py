@@ -29,28 +29,66 @@ def unrelated_views():
 def test_a_smaller_budget_runs_the_views_a_larger_one_started_below_it(unrelated_views):
     long = unrelated_views(12.0)
     assert not any(v["verified"] for v in long)
-    assert cost_at(long, float("inf")) >= 12.0  # nothing verified: the budget was spent
+    assert cost_at(long, float("inf")) >= 8.0  # nothing verified: most of the budget spent
     started = [v["started"] for v in long]
     assert started[0] == 0.0 and started == sorted(started)
-    for budget in (2.0, 5.0, 8.0):
+    # Budgets that stop the cascade at a group's screen (before its extractions; between them
+    # and its screens) and at a view with no screen before it, read off the run itself.
+    # The work before view i (the plain pass's verification, in no view's work, included),
+    # from a view with no screen before it: it started where the views before it ended.
+    unscreened = next(i for i, v in enumerate(long) if i > 0 and v["screen_extraction"] == 0)
+    verification = started[unscreened] - sum(v["work"] for v in long[1:unscreened])
+
+    def before(i: int) -> float:
+        return verification + sum(v["work"] for v in long[1:i])
+
+    k = next(i for i, v in enumerate(long) if i > 1 and v["screen_extraction"] > 0)
+    e = long[k]["screen_extraction"]
+    budgets = (
+        2.0,
+        before(k) + 0.5 * e,
+        0.5 * (before(k) + e + started[k]),
+        0.5 * (started[unscreened] + started[unscreened + 1]),
+    )
+    for budget in budgets:
         short = unrelated_views(budget)
         ran = [v["label"] for v in long if v["started"] < budget]
         assert [v["label"] for v in short] == ran
         assert [v["started"] for v in short] == pytest.approx(started[: len(ran)], rel=1e-12)
         total = sum(v["work"] for v in short)  # the plain pass's 1 included
         assert total == pytest.approx(cost_at(long, budget), rel=1e-9)
+    # Under 2 plain passes the rotations' screen (seven extractions of B) could not be followed
+    # by a view: it is not paid for.
+    assert cost_at(long, 2.0) == 1.0
 
 
 def test_the_budget_a_pair_needs_is_where_its_used_view_started():
     views = [
-        {"label": "plain", "work": 1.0, "started": 0.0, "used": False},
-        {"label": "B rot 90°", "work": 3.5, "started": 2.5, "used": False},
-        {"label": "A zoom 0.5", "work": 0.5, "started": 3.5, "used": True},
+        {"label": "plain", "work": 1.0, "started": 0.0, "screen_extraction": 0.0, "used": False},
+        # After the verification (0.1), the rotations' screen: 2.2 of extractions, 0.2 of
+        # screens; then the first rotated view's matching (1.0).
+        {
+            "label": "B rot 90°",
+            "work": 3.4,
+            "started": 2.5,
+            "screen_extraction": 2.2,
+            "used": False,
+        },
+        {
+            "label": "A zoom 0.5",
+            "work": 0.5,
+            "started": 3.5,
+            "screen_extraction": 0.0,
+            "used": True,
+        },
     ]
     assert solved_after(views) == 3.5
     assert solved_after(views[:1]) == 0.0
-    # The rotations' group screen (2.5 passes) is spent before the budget is checked again.
-    assert cost_at(views, 1.0) == 1.0 + 2.5
-    assert cost_at(views, 3.0) == 1.0 + 3.5
-    assert cost_at(views, 4.0) == 1.0 + 4.0
+    # A budget that the rotations' extractions would reach skips their screen; one that only
+    # their screens would reach stops after the extractions.
+    assert cost_at(views, 1.0) == 1.0
+    assert cost_at(views, 2.3) == 1.0
+    assert cost_at(views, 2.4) == pytest.approx(1.0 + 2.2)
+    assert cost_at(views, 3.0) == pytest.approx(1.0 + 3.4)
+    assert cost_at(views, 4.0) == pytest.approx(1.0 + 3.9)
     assert cost_at(views[:1], 4.0) == 1.0

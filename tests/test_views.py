@@ -141,9 +141,11 @@ def test_a_pair_no_view_solves_runs_the_same_views_however_long_they_take():
     assert labels[0] == labels[1] and len(labels[0]) > 10, labels
     np.testing.assert_allclose(work[0], work[1], rtol=1e-12)
     budget = affcorr.PIPELINE_DEFAULTS["view_relative_budget"]
-    # The budget stopped it (the plain pass's 1 is not the cascade's): the last view started
-    # under it, and with it the cascade reached it.
-    assert sum(work[0][1:-1]) < budget <= sum(work[0][1:]), work[0]
+    # The budget stopped it (the plain pass's 1 is not the cascade's): every view started
+    # under it, and most of it was spent (the cascade skips a screen that would reach it, so
+    # it may stop short: tests/test_bench_views_budget.py reads where).
+    started = [v["started"] for v in runs[0].views]
+    assert max(started) < budget < sum(work[0][1:]) + 4.0, (started, work[0])
     assert not any(v["verified"] for v in runs[0].views)
 
 

@@ -192,6 +192,7 @@ fn view_reports<'py>(py: Python<'py>, m: &Matches) -> PyResult<Bound<'py, PyList
         d.set_item("seconds", v.time.as_secs_f64())?;
         d.set_item("work", v.work)?;
         d.set_item("started", v.started)?;
+        d.set_item("screen_extraction", v.screen_extraction)?;
         out.append(d)?;
     }
     Ok(out)

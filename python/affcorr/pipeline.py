@@ -138,10 +138,15 @@ class MatchResult:
             screened group of tilts or tiles, else None),
             ``seconds``, ``work`` (what it took from ``view_relative_budget``, in plain
             passes: counted, not timed, so the same pair runs the same views on any machine;
-            the views' work sums to the pair's, the last view's including any screening
-            after it that the budget cut short), ``started`` (the cascade's work when the view
-            started, its group's screen included: what the budget was compared with, so the
-            view runs under any ``view_relative_budget`` above it; 0 for the plain pass),
+            the views' work sums to the pair's, the last view's including any extractions
+            after it whose screens the budget cut), ``started`` (the cascade's work when the
+            view started, its group's screen included: what the budget was compared with, so
+            the view runs under any ``view_relative_budget`` above it; 0 for the plain pass),
+            ``screen_extraction`` (the part of ``started`` and ``work`` that its group's
+            screen spent extracting the group's images; 0 for a view with no screen before
+            it: a smaller budget skips the screen when these extractions would reach it, and
+            stops after them when only the screens would: no screen is paid for without a
+            view after it),
             ``used``: whether its ACs are the result's); empty when the cascade did not run
             (``views="off"``, dense matchers).
     """
@@ -240,9 +245,10 @@ class Pipeline:
         view_budget: seconds after which the cascade starts no new view (None: no limit).
         view_relative_budget: the cascade starts no new view once it has done this many
             times the plain pass's work (the default: ``PIPELINE_DEFAULTS["view_relative_budget"]``;
-            None: no limit). It bounds what a pair that no view solves costs, on any image
-            size; the work is counted (pixels extracted, keypoints matched, ACs made), not
-            timed, so which views run does not depend on the machine or its load.
+            None: no limit), nor a screened group's screen that would reach it. It bounds
+            what a pair that no view solves costs, on any image size; the work is counted
+            (pixels extracted, keypoints matched, ACs made), not timed, so which views run
+            does not depend on the machine or its load.
         max_views: at most this many synthetic views (None: the default, 256).
         channel_order: ``"bgr"`` for ``cv2.imread`` arrays (files are decoded by their own
             format; torch tensors ``(C, H, W)`` are accepted).
@@ -482,7 +488,7 @@ class Pipeline:
         spent (about 31 plain passes at the default 30). For a list with many such pairs,
         give the pipeline the batch's budget, as ``affcorr batch`` does:
         ``view_relative_budget=affcorr.batch.BATCH_VIEW_RELATIVE_BUDGET`` (12: every rotated
-        pair and nearly every steep tilt still solved, about 13.5 passes on a pair without
+        pair and nearly every steep tilt still solved, about 12.7 passes on a pair without
         overlap; benches/results/views_budget.md)."""
         _check_on_error(on_error)
         items = []

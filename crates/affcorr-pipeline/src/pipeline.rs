@@ -117,6 +117,12 @@ fn warp_key(image: usize, w: &Option<(AffineWarp, usize, usize)>) -> Option<Warp
     })
 }
 
+/// Whether a view's warped image is too small for the matchers (under 32 px a side): such
+/// a view is skipped, neither side extracted.
+fn too_small(w: &Option<(AffineWarp, usize, usize)>) -> bool {
+    w.is_some_and(|(_, vw, vh)| vw.min(vh) < 32)
+}
+
 /// At most this many views guided by the ACs of earlier views, per pair.
 const MAX_GUIDED_VIEWS: usize = 3;
 
@@ -760,6 +766,7 @@ impl Pipeline {
             time: start.elapsed(),
             work: 1.0,
             started: 0.0,
+            screen_extraction: 0.0,
             used: false,
         }];
         // The meter's reading at the last report (the plain pass's verification is the plain
@@ -853,6 +860,8 @@ impl Pipeline {
         };
         // The time a group's screen took, counted in the first view it runs.
         let mut screen_time = Duration::ZERO;
+        // The extractions of the screens since the last view, reported with the next one.
+        let mut screen_extraction = 0.0;
         loop {
             if tried >= o.max_views || !o.within_budget(start.elapsed(), &store.meter) {
                 break;
@@ -864,16 +873,34 @@ impl Pipeline {
                 match step {
                     Step::View(v) => (v, None),
                     Step::Screened(group) | Step::Ranked(group) => {
-                        let t = Instant::now();
-                        let mut scored = Vec::with_capacity(group.len());
+                        // A screen that no view could follow within the budget is not paid
+                        // for: skipped when its extractions (most of a group's cost) would
+                        // reach the budget, and its screens when they would. The cascade
+                        // stops there, as it would after the screen: the same views run.
+                        let extracted = store.after_extraction(&group, sizes);
+                        if !o.within_budget(start.elapsed(), &extracted) {
+                            break;
+                        }
+                        let (t, before) = (Instant::now(), store.meter.spent);
+                        let mut features = Vec::with_capacity(group.len());
                         for v in group {
                             let warps = v.warps(sizes.0, sizes.1);
-                            let Some([fa, fb]) =
-                                self.screen_features(&mut store, &warps, timings)?
-                            else {
-                                continue;
-                            };
-                            store.meter.screen((fa.len(), fb.len()));
+                            if let Some(f) = self.screen_features(&mut store, &warps, timings)? {
+                                features.push((v, f));
+                            }
+                        }
+                        debug_assert_eq!(store.meter, extracted);
+                        screen_extraction += store.meter.in_passes(store.meter.spent - before);
+                        let mut screened = store.meter.clone();
+                        for (_, [fa, fb]) in &features {
+                            screened.screen((fa.len(), fb.len()));
+                        }
+                        if !o.within_budget(start.elapsed(), &screened) {
+                            break;
+                        }
+                        store.meter = screened;
+                        let mut scored = Vec::with_capacity(features.len());
+                        for (v, [fa, fb]) in features {
                             scored.push((v, Some(screen(&fa, &fb)?)));
                         }
                         // Best first (stable: ties keep the steps' order).
@@ -975,6 +1002,7 @@ impl Pipeline {
                 time: t.elapsed() + std::mem::take(&mut screen_time),
                 work: store.meter.in_passes(store.meter.spent - reported),
                 started,
+                screen_extraction: std::mem::take(&mut screen_extraction),
                 used: false,
             });
             reported = store.meter.spent;
@@ -1024,9 +1052,9 @@ impl Pipeline {
                 rival_floor = rival_floor.max((RIVAL_MARGIN * best_inliers as f64).ceil() as usize);
             }
         }
-        // Work spent after the last view (a group's extractions and screens when the budget
-        // stopped the cascade before any of its views ran) is the last view's, the plain
-        // pass's when no view ran: the views' work sums to the pair's.
+        // Work spent after the last view (a group's extractions whose screens would have
+        // reached the budget; a screen the time budget cut short) is the last view's, the
+        // plain pass's when no view ran: the views' work sums to the pair's.
         if let Some(last) = reports.last_mut() {
             last.work += store.meter.in_passes(store.meter.spent - reported);
         }
@@ -1069,18 +1097,48 @@ impl ViewFeatures<'_> {
         &mut self,
         extractor: &PointMatcher,
         screen: bool,
-        [a, b]: &[Option<(AffineWarp, usize, usize)>; 2],
+        warps: &[Option<(AffineWarp, usize, usize)>; 2],
         timings: &mut Timings,
     ) -> Result<Option<[Rc<ImageFeatures>; 2]>> {
-        let fa = self.side(extractor, screen, 0, a, timings)?;
-        let fb = self.side(extractor, screen, 1, b, timings)?;
-        Ok(fa.zip(fb).map(|(fa, fb)| [fa, fb]))
+        if warps.iter().any(too_small) {
+            return Ok(None);
+        }
+        let fa = self.side(extractor, screen, 0, &warps[0], timings)?;
+        let fb = self.side(extractor, screen, 1, &warps[1], timings)?;
+        Ok(Some([fa, fb]))
+    }
+
+    /// The meter as `group`'s screen (its views on images of `sizes`) will leave it once it
+    /// has extracted the warped images that no extractor has yet: each charged in the order
+    /// the screen extracts them, so that the reading is the one the screen leaves.
+    fn after_extraction(
+        &self,
+        group: &[ViewSpec],
+        sizes: ((usize, usize), (usize, usize)),
+    ) -> WorkMeter {
+        let mut meter = self.meter.clone();
+        let mut new = HashSet::new();
+        for v in group {
+            let warps = v.warps(sizes.0, sizes.1);
+            if warps.iter().any(too_small) {
+                continue;
+            }
+            for (image, w) in warps.iter().enumerate() {
+                if let (Some((_, vw, vh)), Some(key)) = (w, warp_key(image, w))
+                    && !self.charged.contains(&key)
+                    && new.insert(key)
+                {
+                    meter.extraction(vw * vh);
+                }
+            }
+        }
+        meter
     }
 
     /// `extractor`'s features (the screener's store when `screen`) of image `image` (0: A,
-    /// 1: B) under `warp`, extracted on first use; `None` when the warp is too small for the
-    /// matcher. A warped image's first extraction is charged to the meter; the screener's
-    /// features of a working image are not (the plain pass's extractions were).
+    /// 1: B) under `warp` (not [`too_small`]), extracted on first use. A warped image's first
+    /// extraction is charged to the meter; the screener's features of a working image are
+    /// not (the plain pass's extractions were).
     fn side(
         &mut self,
         extractor: &PointMatcher,
@@ -1088,7 +1146,7 @@ impl ViewFeatures<'_> {
         image: usize,
         warp: &Option<(AffineWarp, usize, usize)>,
         timings: &mut Timings,
-    ) -> Result<Option<Rc<ImageFeatures>>> {
+    ) -> Result<Rc<ImageFeatures>> {
         let store = if screen {
             &mut self.screen
         } else {
@@ -1096,17 +1154,14 @@ impl ViewFeatures<'_> {
         };
         let (Some((w, vw, vh)), Some(key)) = (warp, warp_key(image, warp)) else {
             if let Some(f) = &store.plain[image] {
-                return Ok(Some(f.clone()));
+                return Ok(f.clone());
             }
             let f = Rc::new(extract_timed(extractor, self.images[image], timings)?);
             store.plain[image] = Some(f.clone());
-            return Ok(Some(f));
+            return Ok(f);
         };
         if let Some(hit) = store.warped.get(&key) {
-            return Ok(Some(hit.clone()));
-        }
-        if (*vw).min(*vh) < 32 {
-            return Ok(None);
+            return Ok(hit.clone());
         }
         let view = warp_image(self.images[image], w, *vw, *vh)?;
         let f = Rc::new(extract_timed(extractor, &view, timings)?);
@@ -1114,7 +1169,7 @@ impl ViewFeatures<'_> {
             self.meter.extraction(vw * vh);
         }
         store.warped.insert(key, f.clone());
-        Ok(Some(f))
+        Ok(f)
     }
 }
 

@@ -270,10 +270,11 @@ pub struct ViewOptions {
     /// Stop starting views after this much time in the cascade (`None`: no limit).
     pub time_budget: Option<Duration>,
     /// Stop starting views once the cascade has done this many times the plain pass's work
-    /// (`None`: no limit). Unlike [`Self::time_budget`] it scales with the image size and the
-    /// keypoint budget, bounds what a pair that no view solves costs, and is counted, not
-    /// timed (nominal costs of each extraction, matching, screen, verification and AC): which
-    /// views run does not depend on the machine or its load.
+    /// (`None`: no limit), nor a screened group's screen (or its extractions) that would
+    /// reach it, since no view could follow. Unlike [`Self::time_budget`] it scales with the
+    /// image size and the keypoint budget, bounds what a pair that no view solves costs, and
+    /// is counted, not timed (nominal costs of each extraction, matching, screen,
+    /// verification and AC): which views run does not depend on the machine or its load.
     pub relative_budget: Option<f64>,
     /// At most this many synthetic views.
     pub max_views: usize,
@@ -599,14 +600,20 @@ pub struct ViewReport {
     /// The work it took from [`ViewOptions::relative_budget`], in plain passes (the plain
     /// pass: 1): its extractions, its group's screen when it is the first of the group to run,
     /// its matching and its ACs; counted, not timed. The last view (the plain pass when no
-    /// view ran) also carries what was spent after it (a group's extractions and screens when
-    /// the budget stopped the cascade before any of its views ran), so that the views' work
-    /// sums to the pair's.
+    /// view ran) also carries what was spent after it (a group's extractions whose screens
+    /// would have reached the budget, or a screen the time budget cut short), so that the
+    /// views' work sums to the pair's.
     pub work: f64,
     /// The work spent when it started, in plain passes (the plain pass: 0), its group's
     /// screen included: what [`ViewOptions::relative_budget`] was compared with. The view runs
     /// under any budget above it, so one cascade run tells which views a smaller budget runs.
     pub started: f64,
+    /// The part of `started` (and of `work`) that its group's screen spent on extractions, in
+    /// plain passes: 0 for a view with no screen before it. Under a budget at or below
+    /// `started` the cascade stops before this screen, or, when the work before the screen
+    /// plus its extractions is below the budget, after the extractions (its screens would
+    /// reach the budget): no screen is paid for without a view after it.
+    pub screen_extraction: f64,
     /// Whether its ACs are the result's (one view of a cascade; a verified view with the most
     /// inliers is not used when it fell short of a rival's margin, [`RIVAL_MARGIN`]).
     pub used: bool,

@@ -13,7 +13,7 @@ use affcorr_geom::synthetic::gaussian;
 use affcorr_geom::{Mat3, Vec3};
 use affcorr_image::{AffineWarp, GrayImage, warp_image};
 use affcorr_pipeline::views::screen;
-use affcorr_pipeline::{Geometry, Matcher, Pipeline, ViewMode, ViewSpec};
+use affcorr_pipeline::{Geometry, Matcher, Pipeline, ViewMode, ViewOptions, ViewReport, ViewSpec};
 use affcorr_runner::{MatcherFiles, PointMatcher};
 
 fn graffiti() -> (GrayImage, GrayImage, Mat3) {
@@ -105,6 +105,14 @@ fn check_with(p: &Pipeline, a: &GrayImage, b: &GrayImage, gt: &Mat3, what: &str,
         started[0] == 0.0 && started.windows(2).all(|w| w[0] <= w[1]) && started[1] > 0.0,
         "{what}: {started:?}"
     );
+    // Every view started below the budget (30), a screen's extractions within its work.
+    for v in &m.views {
+        assert!(
+            v.started < 30.0 && (0.0..=v.work).contains(&v.screen_extraction),
+            "{what}: {:?}",
+            m.views
+        );
+    }
     eprintln!(
         "{what}: views off: corner error {off_err:.1} px; auto: {} via {:?} ({} inliers), \
          corner error {err:.2} px, median A error {median:.4}, views tried {tried:?}, {:?}, \
@@ -171,6 +179,79 @@ fn an_easy_pair_runs_no_synthetic_view() {
     let off = pipeline(ViewMode::Off).match_pair(&a, &b).unwrap();
     assert_eq!(off.corrs, m.corrs);
     assert!(off.views.is_empty() && off.timings.views.is_zero());
+}
+
+#[test]
+fn a_pair_without_overlap_pays_for_no_screen_that_no_view_can_follow() {
+    // Graffiti against noise: nothing verifies, so the cascade runs until its budget stops it.
+    let (a, _, _) = graffiti();
+    let b = noisy(
+        &GrayImage::new(a.width(), a.height(), vec![0.5; a.width() * a.height()]).unwrap(),
+        0.2,
+        1,
+    );
+    let run = |budget: f64| {
+        let p = common::matcher_builder(Matcher::XFeatLighterGlue, ViewMode::Auto, false)
+            .views(ViewOptions {
+                relative_budget: Some(budget),
+                ..Default::default()
+            })
+            .build()
+            .unwrap();
+        p.match_pair(&a, &b).unwrap().views
+    };
+    // The first step, B's seven rotations, extracts seven images of B's size: more than two
+    // plain passes of work, so under a budget of 2 it is not screened at all (it was, and the
+    // pair cost more than 3 plain passes for no view).
+    let small = run(2.0);
+    assert_eq!(small.len(), 1, "{small:?}");
+    assert_eq!(small[0].work, 1.0);
+    // A smaller budget runs the views of a larger one that started below it, at the same
+    // work. It stops before the next one; when that is the first view of a screened group,
+    // before the screen, or after its extractions when they fit the budget and its screens do
+    // not: it pays for no screen without a view after it.
+    let long = run(12.0);
+    assert!(long.iter().all(|v| !v.verified), "{long:?}");
+    let work = |views: &[ViewReport]| views.iter().map(|v| v.work).sum::<f64>();
+    // The plain pass's verification: in the budget's count, in no view's work (the plain
+    // pass's is 1). A view with no screen before it started where the views before it ended.
+    let unscreened = (1..long.len())
+        .find(|&k| long[k].screen_extraction == 0.0)
+        .unwrap();
+    let verification = long[unscreened].started - (work(&long[..unscreened]) - 1.0);
+    // The work before each view (the budget's count, the plain pass's verification included).
+    let before = |k: usize| work(&long[..k]) - 1.0 + verification;
+    // Budgets that stop the cascade at a group's screen: before its extractions, and between
+    // its extractions and its screens; and one that stops it at a view with no screen.
+    let k = (2..long.len())
+        .find(|&k| long[k].screen_extraction > 0.0)
+        .unwrap();
+    let extracted = before(k) + long[k].screen_extraction;
+    let budgets = [
+        before(k) + 0.5 * long[k].screen_extraction,
+        0.5 * (extracted + long[k].started),
+        0.5 * (long[unscreened].started + long[unscreened + 1].started),
+    ];
+    for budget in budgets {
+        let short = run(budget);
+        let ran = long.iter().take_while(|v| v.started < budget).count();
+        assert!(ran > 1 && ran < long.len(), "{budget}: {long:?}");
+        assert_eq!(short.len(), ran, "{budget}: {short:?}");
+        for (s, l) in short.iter().zip(&long) {
+            assert_eq!(
+                (s.view, s.started, s.screen_extraction),
+                (l.view, l.started, l.screen_extraction)
+            );
+        }
+        let next = &long[ran];
+        let fits = before(ran) + next.screen_extraction < budget;
+        let expected = work(&long[..ran]) + if fits { next.screen_extraction } else { 0.0 };
+        assert!(
+            (work(&short) - expected).abs() < 1e-9,
+            "{budget}: {} against {expected}: {short:?}",
+            work(&short)
+        );
+    }
 }
 
 /// `img` with Gaussian noise of standard deviation `sigma` (gray values in [0, 1]), clamped.
