@@ -48,6 +48,11 @@ def test_an_upside_down_pair_is_solved_through_a_rotated_view(upside_down, refin
     assert res.views[0]["label"] == "plain" and not res.views[0]["verified"]
     assert [v["used"] for v in res.views].count(True) == 1 and res.view["used"]
     assert res.timings["views"] > 0
+    used, tried = res.view, len(res.views) - 1
+    assert res.view_summary().startswith(
+        f"views: ACs of {used['label']} ({used['inliers']} of {used['matches']} matches agree);"
+        f" {tried} synthetic view"
+    ), res.view_summary()
     # The inliers' A against the plane's: the view's 180° turn is composed into A (without
     # it, A would be -A_gt, off by twice its norm; the network's A alone is off by ~0.2).
     c = res.corrs[info.inliers]
@@ -62,6 +67,11 @@ def test_an_easy_pair_tries_no_synthetic_view(refine_affine):
     off = _pipe("off", refine_affine).match_pair(GRAF / "graf1.png", GRAF / "graf3.png")
     np.testing.assert_array_equal(off.corrs, res.corrs)
     assert off.views == [] and off.view is None
+    n, agree = res.views[0]["matches"], res.views[0]["inliers"]
+    assert res.view_summary() == (
+        f"views: the plain pair verified ({agree} of {n} matches agree); no synthetic view needed"
+    )
+    assert off.view_summary() == ""
 
 
 def test_xfeat_star_ranks_its_views_by_xfeat_keypoints(upside_down):
@@ -93,7 +103,7 @@ def test_bad_view_options_are_named(kwargs, fragment):
         affcorr.Pipeline(threads=1, **kwargs)
 
 
-def test_the_cli_takes_the_view_options(tmp_path):
+def test_the_cli_takes_the_view_options(tmp_path, capsys):
     from affcorr import cli
 
     args = cli.build_parser().parse_args(["match", "a.png", "b.png", "-o", "x.npz"])
@@ -108,6 +118,13 @@ def test_the_cli_takes_the_view_options(tmp_path):
          "--max-keypoints", "512", "-o", str(out)]
     )  # fmt: skip
     assert code == 0 and out.is_file()
+    assert "views:" not in capsys.readouterr().out  # views off: no cascade to report
+    code = cli.main(
+        ["match", str(GRAF / "graf1.png"), str(GRAF / "graf3.png"), "--max-keypoints", "512",
+         "-o", str(tmp_path / "m.npz")]
+    )  # fmt: skip
+    assert code == 0
+    assert "views: the plain pair verified (" in capsys.readouterr().out
 
 
 def test_the_relative_budget_stops_the_cascade_of_a_pair_no_view_solves():
@@ -119,6 +136,8 @@ def test_the_relative_budget_stops_the_cascade_of_a_pair_no_view_solves():
     tiny = affcorr.Pipeline(max_keypoints=512, threads=2, view_relative_budget=1e-6)
     res = tiny.match_pair(a, noise)
     assert [v["label"] for v in res.views] == ["plain"] and not res.views[0]["verified"]
+    assert res.view_summary().startswith("views: the plain pair did not verify (")
+    assert res.view_summary().endswith("); no synthetic view run")
     two = affcorr.Pipeline(max_keypoints=512, threads=2, view_relative_budget=None, max_views=2)
     res = two.match_pair(a, noise)
     assert len(res.views) == 3 and not any(v["verified"] for v in res.views), res.views
@@ -127,6 +146,10 @@ def test_the_relative_budget_stops_the_cascade_of_a_pair_no_view_solves():
     # zoom by ½ one image of a quarter of the pixels.
     work = [v["work"] for v in res.views]
     assert work[0] == 1.0 and work[1] > 2.0 and 0 < work[2] < 1.0, work
+    assert res.view_summary().startswith("views: no view verified, the plain pair's ACs kept (")
+    assert res.view_summary().endswith(
+        f"); 2 synthetic views tried, {sum(work):.1f} plain passes of work"
+    )
 
 
 def test_a_pair_no_view_solves_runs_the_same_views_however_long_they_take():

@@ -221,6 +221,12 @@ def _add_pipeline_args(p: argparse.ArgumentParser) -> None:
     )
 
 
+def _print_views(res) -> None:
+    """The view cascade's one line (``MatchResult.view_summary``), when it ran."""
+    if line := res.view_summary():
+        print(line)
+
+
 def _print_timings(timings: dict) -> None:
     logger.info("timings:")
     for k, v in timings.items():
@@ -367,6 +373,7 @@ def cmd_match(args) -> int:
         image_b=args.image_b,
     )
     print(f"{len(res.corrs)} ACs -> {out}")
+    _print_views(res)
     _print_timings(res.timings)
     return 0
 
@@ -436,6 +443,7 @@ def cmd_homography(args) -> int:
         args.image_a, args.image_b, threshold=args.threshold, return_matches=True
     )
     _save_estimate(out, args, {"H": H}, info, res)
+    _print_views(res)
     n = len(info.inliers)
     print(f"inliers: {int(info.inliers.sum())} / {n}")
     print(format_matrix("H", H))
@@ -456,6 +464,7 @@ def cmd_pose(args) -> int:
     )
     models = {"R": pose.R, "t": pose.t, "E": pose.E, "F": pose.F}
     _save_estimate(out, args, models, info, res)
+    _print_views(res)
     print(f"inliers: {int(info.inliers.sum())} / {len(info.inliers)}")
     print(format_matrix("R", pose.R))
     print(format_matrix("t", pose.t))

@@ -166,6 +166,35 @@ class MatchResult:
         cascade did not run."""
         return next((v for v in self.views if v["used"]), None)
 
+    def view_summary(self) -> str:
+        """One line on the view cascade: whose ACs these are, how many synthetic views it
+        tried and the work it took, in plain passes (the plain pass's 1 included); "" when it
+        did not run (``views="off"``, dense matchers). Graffiti 1→3 with B upside down gives
+        ``views: ACs of B rot 180° (252 of 278 matches agree); 1 synthetic view tried, 5.1
+        plain passes of work`` (on one line); the pair upright ``views: the plain pair
+        verified (252 of 278 matches agree); no synthetic view needed``.
+        """
+        if not self.views:
+            return ""
+        used, tried = self.view, len(self.views) - 1
+        work = sum(v["work"] for v in self.views)
+        agree = (
+            f"{used['inliers']} of {used['matches']} matches agree"
+            if used["matches"]
+            else "no matches"
+        )
+        cost = (
+            f"{tried} synthetic view{'s' if tried != 1 else ''} tried, "
+            f"{work:.1f} plain passes of work"
+        )
+        if tried == 0:
+            if used["verified"]:
+                return f"views: the plain pair verified ({agree}); no synthetic view needed"
+            return f"views: the plain pair did not verify ({agree}); no synthetic view run"
+        if not used["verified"]:
+            return f"views: no view verified, the plain pair's ACs kept ({agree}); {cost}"
+        return f"views: ACs of {used['label']} ({agree}); {cost}"
+
     def __len__(self) -> int:
         return len(self.corrs)
 
