@@ -32,8 +32,6 @@ def test_a_smaller_budget_runs_the_views_a_larger_one_started_below_it(unrelated
     assert cost_at(long, float("inf")) >= 8.0  # nothing verified: most of the budget spent
     started = [v["started"] for v in long]
     assert started[0] == 0.0 and started == sorted(started)
-    # Budgets that stop the cascade at a group's screen (before its extractions; between them
-    # and its screens) and at a view with no screen before it, read off the run itself.
     # The work before view i (the plain pass's verification, in no view's work, included),
     # from a view with no screen before it: it started where the views before it ended.
     unscreened = next(i for i, v in enumerate(long) if i > 0 and v["screen_extraction"] == 0)
@@ -42,6 +40,9 @@ def test_a_smaller_budget_runs_the_views_a_larger_one_started_below_it(unrelated
     def before(i: int) -> float:
         return verification + sum(v["work"] for v in long[1:i])
 
+    # Budgets that stop the cascade under 2 plain passes, at a group's screen (before its
+    # extractions; between them and its screens) and at a view with no screen before it, read
+    # off the run itself.
     k = next(i for i, v in enumerate(long) if i > 1 and v["screen_extraction"] > 0)
     e = long[k]["screen_extraction"]
     budgets = (

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use affcorr_image::{AffineWarp, GrayImage, ac_from_views, warp_image};
 use affcorr_runner::{ImageFeatures, PointMatcher};
 
-use super::{Pipeline, WorkMatches};
+use super::{MIN_WORKING_SIDE, Pipeline, WorkMatches};
 use crate::error::Result;
 use crate::result::Timings;
 use crate::views::{
@@ -23,6 +23,7 @@ use crate::views::{
 /// A warped image of the cascade: the image (0: A, 1: B), the warp's bits and the view's size.
 type WarpKey = (usize, [u64; 6], usize, usize);
 
+/// The key of image `image`'s warp `w` in a view (`None`: the image as it is).
 fn warp_key(image: usize, w: &Option<(AffineWarp, usize, usize)>) -> Option<WarpKey> {
     w.map(|(warp, vw, vh)| {
         let [a, b, c, d] = warp.m.map(f64::to_bits);
@@ -31,10 +32,10 @@ fn warp_key(image: usize, w: &Option<(AffineWarp, usize, usize)>) -> Option<Warp
     })
 }
 
-/// Whether a view's warped image is too small for the matchers (under 32 px a side): such
-/// a view is skipped, neither side extracted.
+/// Whether a view's warped image is too small for the matchers (a side under
+/// [`MIN_WORKING_SIDE`]): such a view is skipped, neither side extracted.
 fn too_small(w: &Option<(AffineWarp, usize, usize)>) -> bool {
-    w.is_some_and(|(_, vw, vh)| vw.min(vh) < 32)
+    w.is_some_and(|(_, vw, vh)| vw.min(vh) < MIN_WORKING_SIDE)
 }
 
 /// A view waiting to run, with its screen (`None`: not ranked in a screened group).
