@@ -40,13 +40,15 @@ def test_a_smaller_budget_runs_the_views_a_larger_one_started_below_it(unrelated
     def before(i: int) -> float:
         return verification + sum(v["work"] for v in long[1:i])
 
-    # Budgets that stop the cascade under 2 plain passes, at a group's screen (before its
-    # extractions; between them and its screens) and at a view with no screen before it, read
-    # off the run itself.
+    # Budgets that stop the cascade before the first group's extractions (the rotations'),
+    # at a later group's screen (before its extractions; between them and its screens) and at
+    # a view with no screen before it, read off the run itself.
+    assert long[1]["screen_extraction"] > 0
+    first = before(1) + 0.5 * long[1]["screen_extraction"]
     k = next(i for i, v in enumerate(long) if i > 1 and v["screen_extraction"] > 0)
     e = long[k]["screen_extraction"]
     budgets = (
-        2.0,
+        first,
         before(k) + 0.5 * e,
         0.5 * (before(k) + e + started[k]),
         0.5 * (started[unscreened] + started[unscreened + 1]),
@@ -58,9 +60,9 @@ def test_a_smaller_budget_runs_the_views_a_larger_one_started_below_it(unrelated
         assert [v["started"] for v in short] == pytest.approx(started[: len(ran)], rel=1e-12)
         total = sum(v["work"] for v in short)  # the plain pass's 1 included
         assert total == pytest.approx(cost_at(long, budget), rel=1e-9)
-    # Under 2 plain passes the rotations' screen (seven extractions of B) could not be followed
-    # by a view: it is not paid for.
-    assert cost_at(long, 2.0) == 1.0
+    # Below the rotations' extractions their screen could not be followed by a view: it is not
+    # paid for.
+    assert cost_at(long, first) == 1.0
 
 
 def test_the_budget_a_pair_needs_is_where_its_used_view_started():

@@ -517,7 +517,7 @@ class Pipeline:
         spent (about 31 plain passes at the default 30). For a list with many such pairs,
         give the pipeline the batch's budget, as ``affcorr batch`` does:
         ``view_relative_budget=affcorr.batch.BATCH_VIEW_RELATIVE_BUDGET`` (12: every rotated
-        pair and nearly every steep tilt still solved, about 12.7 passes on a pair without
+        pair and nearly every steep tilt still solved, about 12.4 passes on a pair without
         overlap; benches/results/views_budget.md)."""
         _check_on_error(on_error)
         items = []

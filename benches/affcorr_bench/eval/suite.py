@@ -39,8 +39,9 @@ MATCHES_VERSION = 1
 #: them (views::rivalled_by_rotations). 14: the homography's local optimisation runs its
 #: widening and threshold tracks from each hypothesis, and every raw record gets one
 #: (LoSchedule::Both). 15: XFeat's mutual nearest neighbours verify strongly by 0.4 of their
-#: matches (defaults::weak_ratio).
-AFFCORR_PIPELINE_REVISION = 15
+#: matches (defaults::weak_ratio). 16: the cascade screens its groups on shrunk images while
+#: nothing is kept (views::screen_warps).
+AFFCORR_PIPELINE_REVISION = 16
 #: The Rust sources that make affcorr's matches, Cargo.lock (which pins ONNX Runtime's
 #: bindings and the rest) and the matcher's models (the shape model is in its own tag): their
 #: digest is in affcorr's cache keys too, so an experiment on the cascade that is not landed (or

@@ -789,6 +789,58 @@ pub fn screen_run(scores: &[usize]) -> usize {
     above.clamp(1, SCREEN_RUN)
 }
 
+/// The largest part of its source image's pixels that a screened view's warped image keeps:
+/// a group's screen extracts every warped image of it, most of a hard pair's work, and ranks
+/// its views about as well on images of half the side (benches/results/views_budget.md).
+pub const SCREEN_PIXELS: f64 = 0.25;
+
+/// The strongest compression of its source image, along any direction, that the screen of a
+/// view may add shrinking it below this: a tilt of 4 halved again (1/8 across the tilt)
+/// ranked the steep tilts' views as noise, and two 80° tilts were lost, where the
+/// isotropic shrinks (rotations, zooms, tiles) and tilt 2 rank as at full size.
+pub const SCREEN_MIN_SCALE: f64 = 0.25;
+
+/// The warps (A's, B's; `None`: the image as it is, of size `a` or `b`) on which a view with
+/// `warps` is screened: both shrunk by one factor, so that the view's geometry is unchanged,
+/// the largest at which neither keeps more than [`SCREEN_PIXELS`] of its source's pixels
+/// (in its content: the warped source, or the window of it that the view keeps),
+/// raised so that neither is compressed beyond [`SCREEN_MIN_SCALE`] in any direction; `warps`
+/// themselves when that factor is above 0.9 (a tenth of the side is not worth another
+/// extraction, nor a pixel of rounding).
+pub fn screen_warps(
+    warps: &[Option<(AffineWarp, usize, usize)>; 2],
+    a: (usize, usize),
+    b: (usize, usize),
+) -> [Option<(AffineWarp, usize, usize)>; 2] {
+    let sides = [(warps[0], a), (warps[1], b)]
+        .map(|(w, (sw, sh))| (w.unwrap_or((AffineWarp::IDENTITY, sw, sh)), sw * sh));
+    let mut scale = 1.0f64;
+    let mut floor = 0.0f64;
+    for ((w, vw, vh), source) in sides {
+        // The image's content, not its view's box: a 45° rotation's box is twice its pixels,
+        // and its screen must compare with the other rotations'.
+        let [m11, m12, m21, m22] = w.m;
+        let content = ((vw * vh) as f64).min((m11 * m22 - m12 * m21).abs() * source as f64);
+        scale = scale.min((SCREEN_PIXELS * source as f64 / content).sqrt());
+        floor = floor.max(SCREEN_MIN_SCALE / w.min_singular_value());
+    }
+    let scale = scale.max(floor);
+    if scale > 0.9 {
+        return *warps;
+    }
+    sides.map(|((w, vw, vh), _)| {
+        let shrunk = |n: usize| ((n - 1) as f64 * scale).floor() as usize + 1;
+        Some((
+            AffineWarp {
+                m: w.m.map(|v| v * scale),
+                c: w.c.map(|v| v * scale),
+            },
+            shrunk(vw),
+            shrunk(vh),
+        ))
+    })
+}
+
 /// The screen of a view: the inliers of a homography (points only, [`SCREEN_THRESHOLD`])
 /// among the mutual nearest neighbours of the two views' XFeat descriptors. Matching costs
 /// a few milliseconds where LighterGlue and the ACs cost a few hundred, and on experiment 4's
@@ -1267,6 +1319,54 @@ mod tests {
         s = vec![90, 80, 70, 60, 50, 9, 9, 8, 8, 7, 7];
         assert_eq!(screen_run(&s), SCREEN_RUN);
         assert_eq!(screen_run(&[]), 0);
+    }
+
+    #[test]
+    fn a_view_is_screened_shrunk_to_its_pixel_share_with_its_geometry_kept() {
+        let (a, b) = ((640, 480), (600, 400));
+        let pixels = |w: &Option<(AffineWarp, usize, usize)>, src: (usize, usize)| {
+            w.map_or(1.0, |(_, vw, vh)| (vw * vh) as f64)
+                / w.map_or(1.0, |_| (src.0 * src.1) as f64)
+        };
+        // B turned by 90° against A as it is: both halved, A's side gaining a warp.
+        let turned = ViewSpec::param(ViewImage::B, 90.0, 1.0, 1.0, 0.0);
+        let full = turned.warps(a, b);
+        let shrunk = screen_warps(&full, a, b);
+        let (wa, aw, ah) = shrunk[0].unwrap();
+        assert_eq!((aw, ah), (320, 240));
+        assert_eq!(wa.m, [0.5, 0.0, 0.0, 0.5]);
+        let (wb, bw, bh) = shrunk[1].unwrap();
+        let (fb, ..) = full[1].unwrap();
+        assert_eq!((bw, bh), (200, 300));
+        // The same map, shrunk: a pixel of B lands where the full view puts it, halved.
+        for p in [[0.0, 0.0], [599.0, 0.0], [123.0, 321.0]] {
+            let (s, f) = (wb.apply(p), fb.apply(p));
+            assert!((s[0] - 0.5 * f[0]).abs() < 1e-12 && (s[1] - 0.5 * f[1]).abs() < 1e-12);
+        }
+        // A turn by 45° (its view's box twice its pixels) is halved as the quarter turns are.
+        let oblique = ViewSpec::param(ViewImage::B, 45.0, 1.0, 1.0, 0.0).warps(a, b);
+        let (w45, ..) = screen_warps(&oblique, a, b)[1].unwrap();
+        assert!((w45.min_singular_value() - 0.5).abs() < 1e-12);
+        // A tilt 2 of A (half its pixels) against B as it is: B's share decides, and the tilt
+        // shrinks by the same factor (else the screen would test another view): 1/4 across
+        // the tilt, the most the screen may compress.
+        let tilted = |t| ViewSpec::param(ViewImage::A, 0.0, 1.0, t, 0.0);
+        let full = tilted(2.0).warps(a, b);
+        let shrunk = screen_warps(&full, a, b);
+        assert!((pixels(&shrunk[1], b) - SCREEN_PIXELS).abs() < 0.01);
+        let (wa, ..) = shrunk[0].unwrap();
+        assert!((wa.m[0] / full[0].unwrap().0.m[0] - 0.5).abs() < 1e-3);
+        assert!((wa.min_singular_value() - SCREEN_MIN_SCALE).abs() < 1e-3);
+        // A tilt of 4 is compressed by 1/4 already: screened as it runs.
+        let full = tilted(4.0).warps(a, b);
+        assert_eq!(screen_warps(&full, a, b), full);
+        // Views whose images keep no more than their share already are screened as they run.
+        let small = ViewSpec {
+            other_scale: 0.5,
+            ..ViewSpec::param(ViewImage::A, 0.0, 0.5, 1.0, 0.0)
+        };
+        let full = small.warps(a, b);
+        assert_eq!(screen_warps(&full, a, b), full);
     }
 
     #[test]

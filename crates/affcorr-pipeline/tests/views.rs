@@ -12,7 +12,7 @@ mod common;
 use affcorr_geom::synthetic::gaussian;
 use affcorr_geom::{Mat3, Vec3};
 use affcorr_image::{AffineWarp, GrayImage, warp_image};
-use affcorr_pipeline::views::screen;
+use affcorr_pipeline::views::{rival_views, screen, screen_warps};
 use affcorr_pipeline::{Geometry, Matcher, Pipeline, ViewMode, ViewOptions, ViewReport, ViewSpec};
 use affcorr_runner::{MatcherFiles, PointMatcher};
 
@@ -200,10 +200,11 @@ fn a_pair_without_overlap_pays_for_no_screen_that_no_view_can_follow() {
             .unwrap();
         p.match_pair(&a, &b).unwrap().views
     };
-    // The first step, B's seven rotations, extracts seven images of B's size: more than two
-    // plain passes of work, so under a budget of 2 it is not screened at all (it was, and the
-    // pair cost more than 3 plain passes for no view).
-    let small = run(2.0);
+    // The first step, B's seven rotations, extracts seven images of B and one of A, each
+    // shrunk to half its side for the screen: most of a plain pass of work, so under a budget
+    // of half a pass it is not screened at all (it was, and the pair cost more than the
+    // budget for no view).
+    let small = run(0.5);
     assert_eq!(small.len(), 1, "{small:?}");
     assert_eq!(small[0].work, 1.0);
     // A smaller budget runs the views of a larger one that started below it, at the same
@@ -252,6 +253,48 @@ fn a_pair_without_overlap_pays_for_no_screen_that_no_view_can_follow() {
             work(&short)
         );
     }
+}
+
+#[test]
+fn a_kept_pass_is_rivalled_by_rotations_screened_at_full_size() {
+    // B foreshortened 3.5× across: the plain pass verifies, with few inliers, and is kept;
+    // B's rotations rival it. The screen decides which rivals run, so it sees them at full
+    // size (`views::screen_warps` shrinks the screens of a cascade with nothing kept).
+    let (a, b, _) = graffiti();
+    let (w, vw, vh) = AffineWarp::linear(0.0, 1.0, 3.5, 0.0).fitted(b.width(), b.height());
+    let b = warp_image(&b, &w, vw, vh).unwrap();
+    let run = |mode| pipeline(mode).match_pair(&a, &b).unwrap().views;
+    let auto = run(ViewMode::Auto);
+    assert!(auto[0].verified, "{auto:?}");
+    // In full mode no pass is kept as a proof to rival: the same rotations screen shrunk.
+    let full = run(ViewMode::Full);
+    let rotations = rival_views();
+    for views in [&auto, &full] {
+        assert!(rotations.contains(&views[1].view), "{views:?}");
+        assert!(views[1].screen_extraction > 0.0, "{views:?}");
+    }
+    // Extraction is charged by pixels: the ratio of the two screens' extractions is that of
+    // B's seven rotations at full size to the same shrunk, with A shrunk once.
+    let sizes = ((a.width(), a.height()), (b.width(), b.height()));
+    let pixels = |w: &Option<(AffineWarp, usize, usize)>| w.map_or(0, |(_, vw, vh)| vw * vh);
+    let at_full: usize = rotations
+        .iter()
+        .map(|v| pixels(&v.warps(sizes.0, sizes.1)[1]))
+        .sum();
+    let shrunk: Vec<_> = rotations
+        .iter()
+        .map(|v| screen_warps(&v.warps(sizes.0, sizes.1), sizes.0, sizes.1))
+        .collect();
+    let a_half = pixels(&shrunk[0][0]);
+    assert!(shrunk.iter().all(|w| pixels(&w[0]) == a_half) && a_half > 0);
+    let at_screen = a_half + shrunk.iter().map(|w| pixels(&w[1])).sum::<usize>();
+    let ratio = auto[1].screen_extraction / full[1].screen_extraction;
+    let expected = at_full as f64 / at_screen as f64;
+    assert!(
+        (ratio - expected).abs() < 1e-9 * expected,
+        "{ratio} against {expected}"
+    );
+    assert!(expected > 3.0, "{expected}");
 }
 
 /// `img` with Gaussian noise of standard deviation `sigma` (gray values in [0, 1]), clamped.
@@ -383,7 +426,8 @@ fn a_slow_matcher_screens_its_views_with_xfeat_and_still_solves_the_rotated_pair
     check_with(&p, &a, &b_rot, &gt, "DISK, B rotated 135°", 5.0);
 
     // The reported screen of every rotated view is XFeat's: mutual nearest neighbours of
-    // XFeat's keypoints in A and in the view of B, and a homography's inliers among them.
+    // XFeat's keypoints in the view's images as the screen shrinks them (A halved, B turned
+    // and halved), and a homography's inliers among them.
     let m = p.match_pair(&a, &b_rot).unwrap();
     let xfeat = PointMatcher::load(
         Matcher::XFeatMnn,
@@ -396,17 +440,26 @@ fn a_slow_matcher_screens_its_views_with_xfeat_and_still_solves_the_rotated_pair
         2,
     )
     .unwrap();
-    let fa = xfeat.extract(&a, None).unwrap();
     let screened: Vec<_> = m.views.iter().filter(|v| v.screen.is_some()).collect();
     assert!(!screened.is_empty(), "{:?}", m.views);
     for v in screened {
         let sizes = ((a.width(), a.height()), (b_rot.width(), b_rot.height()));
-        let [None, Some((warp, vw, vh))] = v.view.warps(sizes.0, sizes.1) else {
-            panic!("a rotated view warps B only: {:?}", v.view);
+        let full = v.view.warps(sizes.0, sizes.1);
+        assert!(
+            full[0].is_none(),
+            "a rotated view warps B only: {:?}",
+            v.view
+        );
+        let [Some((wa, aw, ah)), Some((wb, bw, bh))] = screen_warps(&full, sizes.0, sizes.1) else {
+            panic!("a rotation's screen shrinks both images: {:?}", v.view);
         };
-        let fb = xfeat
-            .extract(&warp_image(&b_rot, &warp, vw, vh).unwrap(), None)
-            .unwrap();
+        assert!((wa.m[0] - 0.5).abs() < 1e-12, "{wa:?}");
+        let features = |img: &GrayImage, w: &AffineWarp, vw: usize, vh: usize| {
+            xfeat
+                .extract(&warp_image(img, w, vw, vh).unwrap(), None)
+                .unwrap()
+        };
+        let (fa, fb) = (features(&a, &wa, aw, ah), features(&b_rot, &wb, bw, bh));
         assert_eq!(
             v.screen,
             Some(screen(&fa, &fb).unwrap()),
@@ -449,8 +502,9 @@ fn xfeat_star_ranks_its_views_by_xfeat_keypoints_and_solves_the_rotated_pair() {
     assert_eq!(p.view_screen(), Matcher::XFeatMnn);
     let (a, b_rot, gt) = rotated_graffiti(135.0);
     check_with(&p, &a, &b_rot, &gt, "XFeat*, B rotated 135°", 5.0);
-    // A rotation within the matcher's ±45° of the one that undoes B's screens highest, and is
-    // the view that solved it (before, every view screened 0 and B turned by 90° ran first).
+    // A rotation within the matcher's ±45° of the one that undoes B's (turned by θ more, B is
+    // turned by 135° + θ: 225° undoes it) screens highest, and is the view that solved it
+    // (before, every view screened 0 and B turned by 90° ran first).
     let m = p.match_pair(&a, &b_rot).unwrap();
     let best = m
         .views
@@ -459,7 +513,8 @@ fn xfeat_star_ranks_its_views_by_xfeat_keypoints_and_solves_the_rotated_pair() {
         .max_by_key(|v| v.screen)
         .unwrap();
     assert!(best.screen > Some(0), "{:?}", m.views);
-    let off_by = (best.view.rotation.to_degrees() - 135.0).abs();
+    let residual = (best.view.rotation.to_degrees() + 135.0).rem_euclid(360.0);
+    let off_by = residual.min(360.0 - residual);
     assert!(off_by <= 45.0 + 1e-9, "{}", best.view.label());
     assert!(best.used, "{:?}", m.views);
 }

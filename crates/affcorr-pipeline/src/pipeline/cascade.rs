@@ -17,7 +17,7 @@ use crate::result::Timings;
 use crate::views::{
     CONFIDENT_VIEW, REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewReport, ViewSpec, WorkMeter,
     cascade_steps, guided_view, planar_rival, planar_support, refinement_view, rival_views,
-    rivalled_by_rotations, screen, screen_run, uncertain, verify, weak_yield,
+    rivalled_by_rotations, screen, screen_run, screen_warps, uncertain, verify, weak_yield,
 };
 
 /// A warped image of the cascade: the image (0: A, 1: B), the warp's bits and the view's size.
@@ -37,6 +37,9 @@ fn warp_key(image: usize, w: &Option<(AffineWarp, usize, usize)>) -> Option<Warp
 fn too_small(w: &Option<(AffineWarp, usize, usize)>) -> bool {
     w.is_some_and(|(_, vw, vh)| vw.min(vh) < MIN_WORKING_SIDE)
 }
+
+/// The warps of a view's images A and B, each with its view's size ([`ViewSpec::warps`]).
+type ViewWarps = [Option<(AffineWarp, usize, usize)>; 2];
 
 /// A view waiting to run, with its screen (`None`: not ranked in a screened group).
 type Queued = (ViewSpec, Option<usize>);
@@ -72,15 +75,18 @@ impl Pipeline {
         }
     }
 
-    /// Screens `group` ([`screen`]) on images of `sizes`: extracts each of its warped images
-    /// once (adding the work of the extractions, in plain passes, to `extraction`) and scores
-    /// its views, in the group's order. `None` when no view could follow the screen within
-    /// the budget: the cascade stops there, as it would after the screen, without paying
-    /// for it; before the extractions when they alone would reach the budget (they are most
-    /// of a group's cost), after them when the screens would.
+    /// Screens `group` ([`screen`]) on images of `sizes`, shrunk ([`screen_warps`]) when
+    /// `shrink`: extracts each of its warped images once (adding the work of the
+    /// extractions, in plain passes, to `extraction`) and scores its views, in the group's
+    /// order. `None` when no view could follow the screen within the budget: the cascade
+    /// stops there, as it would after the screen, without paying for it; before the
+    /// extractions when they alone would reach the budget (they are most of a group's cost),
+    /// after them when the screens would.
+    #[allow(clippy::too_many_arguments)]
     fn screen_group(
         &self,
         group: Vec<ViewSpec>,
+        shrink: bool,
         store: &mut ViewFeatures<'_>,
         sizes: ((usize, usize), (usize, usize)),
         start: Instant,
@@ -88,15 +94,25 @@ impl Pipeline {
         timings: &mut Timings,
     ) -> Result<Option<Vec<Queued>>> {
         let o = &self.views;
-        let extracted = store.after_extraction(&group, sizes);
+        let screened_warps: Vec<ViewWarps> = group
+            .iter()
+            .map(|v| {
+                let warps = v.warps(sizes.0, sizes.1);
+                if shrink {
+                    screen_warps(&warps, sizes.0, sizes.1)
+                } else {
+                    warps
+                }
+            })
+            .collect();
+        let extracted = store.after_extraction(&screened_warps);
         if !o.within_budget(start.elapsed(), &extracted) {
             return Ok(None);
         }
         let before = store.meter.spent;
         let mut features = Vec::with_capacity(group.len());
-        for v in group {
-            let warps = v.warps(sizes.0, sizes.1);
-            if let Some(f) = self.screen_features(store, &warps, timings)? {
+        for (v, warps) in group.into_iter().zip(&screened_warps) {
+            if let Some(f) = self.screen_features(store, warps, timings)? {
                 features.push((v, f));
             }
         }
@@ -258,8 +274,13 @@ impl Pipeline {
                     Step::View(v) => (v, None),
                     Step::Screened(group) | Step::Ranked(group) => {
                         let t = Instant::now();
+                        // Shrunk while nothing is kept. The rivals of a kept pass or view
+                        // are screened at full size: a pattern that repeats under quarter
+                        // turns separates them by few inliers, and the screen decides which
+                        // run (shrunk, views_pose's chessboards lost 19 pairs, gained 9).
                         let Some(mut scored) = self.screen_group(
                             group,
+                            rival_floor == 0,
                             &mut store,
                             sizes,
                             start,
@@ -474,18 +495,13 @@ impl ViewFeatures<'_> {
         Ok(Some([fa, fb]))
     }
 
-    /// The meter as `group`'s screen (its views on images of `sizes`) will leave it once it
+    /// The meter as a group's screen (its views' images under `warps`) will leave it once it
     /// has extracted the warped images that no extractor has yet: each charged in the order
     /// the screen extracts them, so that the reading is the one the screen leaves.
-    fn after_extraction(
-        &self,
-        group: &[ViewSpec],
-        sizes: ((usize, usize), (usize, usize)),
-    ) -> WorkMeter {
+    fn after_extraction(&self, warps: &[ViewWarps]) -> WorkMeter {
         let mut meter = self.meter.clone();
         let mut new = HashSet::new();
-        for v in group {
-            let warps = v.warps(sizes.0, sizes.1);
+        for warps in warps {
             if warps.iter().any(too_small) {
                 continue;
             }
