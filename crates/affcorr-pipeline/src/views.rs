@@ -413,6 +413,13 @@ impl WorkMeter {
     }
 }
 
+/// One image's warp in a view, with the size of the view it makes (`None`: the image as it
+/// is).
+pub type ImageWarp = Option<(AffineWarp, usize, usize)>;
+
+/// The warps of a view's images A and B ([`ViewSpec::warps`]).
+pub type ViewWarps = [ImageWarp; 2];
+
 /// Which image a view warps.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ViewImage {
@@ -503,11 +510,7 @@ impl ViewSpec {
 
     /// The warps of images A and B (`width` × `height` each) that make this view, each with
     /// the size of its view, `None` for an image matched as it is.
-    pub fn warps(
-        &self,
-        a: (usize, usize),
-        b: (usize, usize),
-    ) -> [Option<(AffineWarp, usize, usize)>; 2] {
+    pub fn warps(&self, a: (usize, usize), b: (usize, usize)) -> ViewWarps {
         let (main, other) = match self.image {
             ViewImage::None => return [None, None],
             ViewImage::A => (a, b),
@@ -794,10 +797,11 @@ pub fn screen_run(scores: &[usize]) -> usize {
 /// its views about as well on images of half the side (benches/results/views_budget.md).
 pub const SCREEN_PIXELS: f64 = 0.25;
 
-/// The strongest compression of its source image, along any direction, that the screen of a
-/// view may add shrinking it below this: a tilt of 4 halved again (1/8 across the tilt)
-/// ranked the steep tilts' views as noise, and two 80° tilts were lost, where the
-/// isotropic shrinks (rotations, zooms, tiles) and tilt 2 rank as at full size.
+/// The strongest compression of its source image, along any direction, that a view's screen
+/// may shrink it to (it never shrinks an image already compressed beyond this): a tilt of 4
+/// halved again (1/8 across the tilt) screened the steep tilts' views as noise, and two 80°
+/// tilts were lost, where the isotropic shrinks (rotations, zooms, tiles) and tilt 2 solved
+/// as many as at full size (docs/pipeline.md, "Views").
 pub const SCREEN_MIN_SCALE: f64 = 0.25;
 
 /// The warps (A's, B's; `None`: the image as it is, of size `a` or `b`) on which a view with
@@ -807,11 +811,7 @@ pub const SCREEN_MIN_SCALE: f64 = 0.25;
 /// raised so that neither is compressed beyond [`SCREEN_MIN_SCALE`] in any direction; `warps`
 /// themselves when that factor is above 0.9 (a tenth of the side is not worth another
 /// extraction, nor a pixel of rounding).
-pub fn screen_warps(
-    warps: &[Option<(AffineWarp, usize, usize)>; 2],
-    a: (usize, usize),
-    b: (usize, usize),
-) -> [Option<(AffineWarp, usize, usize)>; 2] {
+pub fn screen_warps(warps: &ViewWarps, a: (usize, usize), b: (usize, usize)) -> ViewWarps {
     let sides = [(warps[0], a), (warps[1], b)]
         .map(|(w, (sw, sh))| (w.unwrap_or((AffineWarp::IDENTITY, sw, sh)), sw * sh));
     let mut scale = 1.0f64;
@@ -1324,9 +1324,8 @@ mod tests {
     #[test]
     fn a_view_is_screened_shrunk_to_its_pixel_share_with_its_geometry_kept() {
         let (a, b) = ((640, 480), (600, 400));
-        let pixels = |w: &Option<(AffineWarp, usize, usize)>, src: (usize, usize)| {
-            w.map_or(1.0, |(_, vw, vh)| (vw * vh) as f64)
-                / w.map_or(1.0, |_| (src.0 * src.1) as f64)
+        let share = |w: &ImageWarp, (sw, sh): (usize, usize)| {
+            w.map_or(1.0, |(_, vw, vh)| (vw * vh) as f64 / (sw * sh) as f64)
         };
         // B turned by 90° against A as it is: both halved, A's side gaining a warp.
         let turned = ViewSpec::param(ViewImage::B, 90.0, 1.0, 1.0, 0.0);
@@ -1353,7 +1352,7 @@ mod tests {
         let tilted = |t| ViewSpec::param(ViewImage::A, 0.0, 1.0, t, 0.0);
         let full = tilted(2.0).warps(a, b);
         let shrunk = screen_warps(&full, a, b);
-        assert!((pixels(&shrunk[1], b) - SCREEN_PIXELS).abs() < 0.01);
+        assert!((share(&shrunk[1], b) - SCREEN_PIXELS).abs() < 0.01);
         let (wa, ..) = shrunk[0].unwrap();
         assert!((wa.m[0] / full[0].unwrap().0.m[0] - 0.5).abs() < 1e-3);
         assert!((wa.min_singular_value() - SCREEN_MIN_SCALE).abs() < 1e-3);

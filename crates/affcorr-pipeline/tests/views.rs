@@ -12,7 +12,7 @@ mod common;
 use affcorr_geom::synthetic::gaussian;
 use affcorr_geom::{Mat3, Vec3};
 use affcorr_image::{AffineWarp, GrayImage, warp_image};
-use affcorr_pipeline::views::{rival_views, screen, screen_warps};
+use affcorr_pipeline::views::{ImageWarp, rival_views, screen, screen_warps};
 use affcorr_pipeline::{Geometry, Matcher, Pipeline, ViewMode, ViewOptions, ViewReport, ViewSpec};
 use affcorr_runner::{MatcherFiles, PointMatcher};
 
@@ -276,7 +276,7 @@ fn a_kept_pass_is_rivalled_by_rotations_screened_at_full_size() {
     // Extraction is charged by pixels: the ratio of the two screens' extractions is that of
     // B's seven rotations at full size to the same shrunk, with A shrunk once.
     let sizes = ((a.width(), a.height()), (b.width(), b.height()));
-    let pixels = |w: &Option<(AffineWarp, usize, usize)>| w.map_or(0, |(_, vw, vh)| vw * vh);
+    let pixels = |w: &ImageWarp| w.map_or(0, |(_, vw, vh)| vw * vh);
     let at_full: usize = rotations
         .iter()
         .map(|v| pixels(&v.warps(sizes.0, sizes.1)[1]))

@@ -15,16 +15,17 @@ use super::{MIN_WORKING_SIDE, Pipeline, WorkMatches};
 use crate::error::Result;
 use crate::result::Timings;
 use crate::views::{
-    CONFIDENT_VIEW, REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewReport, ViewSpec, WorkMeter,
-    cascade_steps, guided_view, planar_rival, planar_support, refinement_view, rival_views,
-    rivalled_by_rotations, screen, screen_run, screen_warps, uncertain, verify, weak_yield,
+    CONFIDENT_VIEW, ImageWarp, REFINE_BELOW, RIVAL_MARGIN, Step, ViewMode, ViewReport, ViewSpec,
+    ViewWarps, WorkMeter, cascade_steps, guided_view, planar_rival, planar_support,
+    refinement_view, rival_views, rivalled_by_rotations, screen, screen_run, screen_warps,
+    uncertain, verify, weak_yield,
 };
 
 /// A warped image of the cascade: the image (0: A, 1: B), the warp's bits and the view's size.
 type WarpKey = (usize, [u64; 6], usize, usize);
 
 /// The key of image `image`'s warp `w` in a view (`None`: the image as it is).
-fn warp_key(image: usize, w: &Option<(AffineWarp, usize, usize)>) -> Option<WarpKey> {
+fn warp_key(image: usize, w: &ImageWarp) -> Option<WarpKey> {
     w.map(|(warp, vw, vh)| {
         let [a, b, c, d] = warp.m.map(f64::to_bits);
         let [e, f] = warp.c.map(f64::to_bits);
@@ -34,12 +35,9 @@ fn warp_key(image: usize, w: &Option<(AffineWarp, usize, usize)>) -> Option<Warp
 
 /// Whether a view's warped image is too small for the matchers (a side under
 /// [`MIN_WORKING_SIDE`]): such a view is skipped, neither side extracted.
-fn too_small(w: &Option<(AffineWarp, usize, usize)>) -> bool {
+fn too_small(w: &ImageWarp) -> bool {
     w.is_some_and(|(_, vw, vh)| vw.min(vh) < MIN_WORKING_SIDE)
 }
-
-/// The warps of a view's images A and B, each with its view's size ([`ViewSpec::warps`]).
-type ViewWarps = [Option<(AffineWarp, usize, usize)>; 2];
 
 /// A view waiting to run, with its screen (`None`: not ranked in a screened group).
 type Queued = (ViewSpec, Option<usize>);
@@ -55,7 +53,7 @@ impl Pipeline {
     fn view_features(
         &self,
         store: &mut ViewFeatures<'_>,
-        warps: &[Option<(AffineWarp, usize, usize)>; 2],
+        warps: &ViewWarps,
         timings: &mut Timings,
     ) -> Result<Option<[Rc<ImageFeatures>; 2]>> {
         store.pair(&self.matcher, false, warps, timings)
@@ -66,7 +64,7 @@ impl Pipeline {
     fn screen_features(
         &self,
         store: &mut ViewFeatures<'_>,
-        warps: &[Option<(AffineWarp, usize, usize)>; 2],
+        warps: &ViewWarps,
         timings: &mut Timings,
     ) -> Result<Option<[Rc<ImageFeatures>; 2]>> {
         match &self.screener {
@@ -339,7 +337,7 @@ impl Pipeline {
                 raw.timings.network -= f.timings.network;
                 raw.timings.detection -= f.timings.detection;
             }
-            let warped = |img: &GrayImage, w: &Option<(AffineWarp, usize, usize)>| {
+            let warped = |img: &GrayImage, w: &ImageWarp| {
                 w.map(|(warp, vw, vh)| warp_image(img, &warp, vw, vh))
                     .transpose()
             };
@@ -484,7 +482,7 @@ impl ViewFeatures<'_> {
         &mut self,
         extractor: &PointMatcher,
         screen: bool,
-        warps: &[Option<(AffineWarp, usize, usize)>; 2],
+        warps: &ViewWarps,
         timings: &mut Timings,
     ) -> Result<Option<[Rc<ImageFeatures>; 2]>> {
         if warps.iter().any(too_small) {
@@ -526,7 +524,7 @@ impl ViewFeatures<'_> {
         extractor: &PointMatcher,
         screen: bool,
         image: usize,
-        warp: &Option<(AffineWarp, usize, usize)>,
+        warp: &ImageWarp,
         timings: &mut Timings,
     ) -> Result<Rc<ImageFeatures>> {
         let store = if screen {
