@@ -170,9 +170,9 @@ class MatchResult:
         """One line on the view cascade: whose ACs these are, how many synthetic views it
         tried and the work it took, in plain passes (the plain pass's 1 included); "" when it
         did not run (``views="off"``, dense matchers). Graffiti 1→3 with B upside down gives
-        ``views: ACs of B rot 180° (252 of 278 matches agree); 1 synthetic view tried, 5.1
+        ``views: ACs of B rot 180° (249 of 277 matches agree); 1 synthetic view tried, 3.0
         plain passes of work`` (on one line); the pair upright ``views: the plain pair
-        verified (252 of 278 matches agree); no synthetic view needed``.
+        verified (249 of 277 matches agree); no synthetic view needed``.
         """
         if not self.views:
             return ""
