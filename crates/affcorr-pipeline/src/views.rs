@@ -799,9 +799,9 @@ pub const SCREEN_PIXELS: f64 = 0.25;
 
 /// The strongest compression of its source image, along any direction, that a view's screen
 /// may shrink it to (it never shrinks an image already compressed beyond this): a tilt of 4
-/// halved again (1/8 across the tilt) screened the steep tilts' views as noise, and two 80°
-/// tilts were lost, where the isotropic shrinks (rotations, zooms, tiles) and tilt 2 solved
-/// as many as at full size (docs/pipeline.md, "Views").
+/// halved again (1/8 across the tilt) screened the steep tilts' views as noise and lost 80°
+/// tilts, where the isotropic shrinks (rotations, zooms, tiles) and tilt 2 solved as many as
+/// at full size (docs/pipeline.md, "Views", has the figures).
 pub const SCREEN_MIN_SCALE: f64 = 0.25;
 
 /// The warps (A's, B's; `None`: the image as it is, of size `a` or `b`) on which a view with

@@ -275,7 +275,8 @@ impl Pipeline {
                         // Shrunk while nothing is kept. The rivals of a kept pass or view
                         // are screened at full size: a pattern that repeats under quarter
                         // turns separates them by few inliers, and the screen decides which
-                        // run (shrunk, views_pose's chessboards lost 19 pairs, gained 9).
+                        // run (docs/pipeline.md, "Views": shrunk, views_pose's chessboards
+                        // lost more pairs than they gained).
                         let Some(mut scored) = self.screen_group(
                             group,
                             rival_floor == 0,
